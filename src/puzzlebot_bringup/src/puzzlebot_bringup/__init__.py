@@ -1,0 +1,1 @@
+"""PuzzleBot bringup: scenarios (ROS-free parsing and reporting)."""

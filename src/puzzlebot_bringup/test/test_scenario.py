@@ -1,0 +1,47 @@
+import glob
+import os
+
+import pytest
+
+from puzzlebot_common.config import load_yaml
+from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.robots import parse_robot_list, robot_names
+from puzzlebot_bringup.scenario import StepResult, format_summary, parse_scenario
+
+SCENARIOS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "config", "scenarios", "*.yaml")))
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=os.path.basename)
+def test_shipped_scenarios_parse(path):
+    data = load_yaml(path)
+    names = robot_names(parse_robot_list(data))
+    scenario = parse_scenario(data["scenario"], names)
+    assert set(scenario.start) == set(names)
+
+
+ROBOTS = ["pz1", "pz2"]
+
+
+@pytest.mark.parametrize("data, fragment", [
+    ({"name": "x", "start": {}, "steps": []}, "non-empty list"),
+    ({"name": "x", "start": {}}, "missing 'steps'"),
+    ({"name": "x", "start": {}, "steps": [{"behavior": "dance"}]}, "unknown behaviour"),
+    ({"name": "x", "start": {}, "steps": [{"behavior": "go_to_goal", "goals": {"pz9": [0, 0]}}]}, "unknown robot"),
+    ({"name": "x", "start": {}, "steps": [{"behavior": "go_to_goal", "goals": {"pz1": [0]}}]}, "2 finite"),
+    ({"name": "x", "start": {}, "steps": [{"behavior": "follow_velocity", "velocities": {"pz1": [0, 0]}}]},
+     "duration"),
+    ({"name": "x", "start": {}, "steps": [{"behavior": "stop", "timeout": -2}]}, "timeout"),
+    ({"name": "x", "start": {}, "steps": [{"behavior": "stop", "goal": {}}]}, "unknown key"),
+])
+def test_bad_scenarios_name_the_problem(data, fragment):
+    with pytest.raises(ConfigError) as e:
+        parse_scenario(data, ROBOTS)
+    assert fragment in str(e.value)
+
+
+def test_summary_reports_outcome_and_errors():
+    scenario = parse_scenario({"name": "demo", "start": {}, "steps": [
+        {"behavior": "go_to_goal", "goals": {"pz1": [0.1, 0.0]}}, {"behavior": "stop"}]}, ROBOTS)
+    text, ok = format_summary(scenario, [StepResult(scenario.steps[0], "succeeded", "done", 5.0, {"pz1": 0.0031})],
+                              wall_seconds=2.0, sim_seconds=5.0)
+    assert not ok and "pz1 3.1 mm" in text and "1 later step(s) not run" in text and "2.5x" in text

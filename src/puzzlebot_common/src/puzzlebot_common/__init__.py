@@ -1,0 +1,1 @@
+"""ROS-free building blocks shared by the PuzzleBot packages."""

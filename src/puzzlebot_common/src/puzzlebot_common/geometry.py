@@ -1,0 +1,115 @@
+"""Planar geometry: angles, SE(2) poses, convex polygons, the robot footprint.
+
+Conventions: positions in metres, angles in radians, a pose is
+``(x, y, theta)`` of a body frame in the world frame, theta counter-clockwise
+from the world x axis. Polygons are (K, 2) arrays of vertices numbered
+counter-clockwise.
+"""
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from puzzlebot_common.params import from_mapping, require_positive
+
+
+def wrap_angle(a):
+    """Wrap an angle (float) or an array of angles to [-pi, pi)."""
+    w = (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(w) if w.ndim == 0 else w
+
+
+def rot(theta):
+    """2x2 rotation matrix R(theta)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def transform_point(pose, p):
+    """Express body-frame point ``p`` (x, y) of a body at ``pose`` in the world frame."""
+    x, y, th = pose
+    c, s = math.cos(th), math.sin(th)
+    return np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1]])
+
+
+def inverse_transform_point(pose, q):
+    """Express world point ``q`` in the body frame of a body at ``pose``."""
+    x, y, th = pose
+    c, s = math.cos(th), math.sin(th)
+    dx, dy = q[0] - x, q[1] - y
+    return np.array([c * dx + s * dy, -s * dx + c * dy])
+
+
+def compose(pose, rel):
+    """Pose of a frame given relative to a body at ``pose`` (both (x, y, theta))."""
+    p = transform_point(pose, rel[:2])
+    return np.array([p[0], p[1], wrap_angle(pose[2] + rel[2])])
+
+
+def polygon_halfplanes(vertices):
+    """Linear form of point-in-convex-polygon (paper, eq. "pip").
+
+    For counter-clockwise vertices A_1..A_K returns ``(G, h)`` with
+    ``G @ p <= h`` exactly when ``p`` lies inside or on the polygon. Row k is
+    ``[y_{k+1} - y_k, -(x_{k+1} - x_k)] (p - A_k) <= 0``.
+    """
+    a = np.asarray(vertices, dtype=float)
+    b = np.roll(a, -1, axis=0)
+    g = np.stack([b[:, 1] - a[:, 1], -(b[:, 0] - a[:, 0])], axis=1)
+    h = np.einsum("ij,ij->i", g, a)
+    return g, h
+
+
+def signed_margin(vertices, p):
+    """Distance by which ``p`` lies inside the convex polygon (negative outside).
+
+    The minimum over edges of the signed distance to the edge line; for a
+    point outside it is a lower bound (in magnitude) of the Euclidean distance.
+    """
+    g, h = polygon_halfplanes(vertices)
+    norms = np.linalg.norm(g, axis=1)
+    return float(np.min((h - g @ np.asarray(p, dtype=float)) / norms))
+
+
+def point_in_convex_polygon(vertices, p, eps=0.0):
+    """True when ``p`` is inside the polygon grown by ``eps`` metres."""
+    return signed_margin(vertices, p) >= -eps
+
+
+@dataclass(frozen=True)
+class RobotGeometry:
+    """Dimensions the controller needs (metres). Defaults: facts.md."""
+
+    body_side: float = 0.05        # L: square body, origin at its centre
+    anchor_length: float = 0.0125  # l: anchor head point C' = C + [-l, 0]
+    wheel_base: float = 0.04       # track used to split (v, w) into wheel speeds
+
+    @classmethod
+    def from_dict(cls, data, where="geometry"):
+        return from_mapping(cls, data, where)
+
+    def check(self, where="geometry"):
+        require_positive(self, [f.name for f in fields(self)], where)
+
+    def front_triangle(self):
+        """Coupling polygon in the body frame (paper: the anchor point of a
+        coupled pair stays in the triangle of this robot's centre and its
+        front-right and front-left corners), counter-clockwise."""
+        h = self.body_side / 2.0
+        return np.array([[0.0, 0.0], [h, -h], [h, h]])
+
+    def footprint(self):
+        """Body square in the body frame, counter-clockwise."""
+        h = self.body_side / 2.0
+        return np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+
+
+def yaw_from_quaternion(qx, qy, qz, qw):
+    """Yaw (rotation about world z) of a quaternion, in [-pi, pi]."""
+    return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+def quaternion_from_yaw(yaw):
+    """Quaternion (x, y, z, w) of a pure yaw rotation."""
+    return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))

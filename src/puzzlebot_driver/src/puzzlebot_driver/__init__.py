@@ -1,0 +1,1 @@
+"""PuzzleBot lab hardware driver: ROS-free core (ESP8266 protocol, ...)."""

@@ -1,0 +1,1 @@
+"""PuzzleBot model predictive control: ROS-free core (model, MPC, behaviours)."""

@@ -1,0 +1,123 @@
+"""One control step of the MPC node, without ROS.
+
+The node feeds measured poses in with :meth:`ControlLoop.on_pose` and calls
+:meth:`ControlLoop.step` every ``dt``; the returned commands go to
+``/<robot>/cmd_vel``. Poses are world-frame ``(x, y, yaw)`` with their
+measurement stamps (seconds).
+
+Safety rules, applied every step:
+- a non-finite pose, a pose for an unknown robot or one older than the last
+  accepted sample is rejected (the caller logs the returned reason);
+- a robot without a pose newer than ``settings.pose_timeout`` is commanded
+  to zero and left out of its behaviour until fresh poses return;
+- a failed solve commands zero to every robot (``fallback == "stop"``).
+"""
+
+import math
+from dataclasses import dataclass, replace
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from puzzlebot_mpc.behaviors import BehaviorManager
+from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
+from puzzlebot_mpc.model import NX
+
+
+@dataclass
+class PoseSample:
+    stamp: float   # s, measurement time
+    x: float       # m, world frame
+    y: float       # m
+    yaw: float     # rad
+
+
+class PoseBook:
+    """Latest accepted pose of each robot."""
+
+    def __init__(self, names, timeout):
+        self.timeout = timeout
+        self._poses: Dict[str, Optional[PoseSample]] = {n: None for n in names}
+
+    def update(self, name, stamp, x, y, yaw):
+        """Store a sample; return None if accepted, else the reason it was rejected."""
+        if name not in self._poses:
+            return "pose for unknown robot %r" % name
+        if not all(math.isfinite(v) for v in (stamp, x, y, yaw)):
+            return "non-finite pose for %s: (%r, %r, %r) at %r" % (name, x, y, yaw, stamp)
+        last = self._poses[name]
+        if last is not None and stamp < last.stamp:
+            return "pose for %s is older (%.3f s) than the last one (%.3f s)" % (name, stamp, last.stamp)
+        self._poses[name] = PoseSample(stamp, x, y, yaw)
+        return None
+
+    def latest(self, name):
+        return self._poses[name]
+
+    def fresh(self, name, now):
+        """(x, y, yaw) if the latest sample is at most ``timeout`` old, else None."""
+        p = self._poses[name]
+        if p is None or now - p.stamp > self.timeout:
+            return None
+        return (p.x, p.y, p.yaw)
+
+
+@dataclass
+class StepOutput:
+    commands: Dict[str, Tuple[float, float]]   # robot -> (v [m/s], w [rad/s])
+    result: MPCResult
+    status: object                             # behaviors.BehaviorStatus
+    stale: List[str]                           # robots stopped for lack of a fresh pose
+    poses: Dict[str, Optional[Tuple[float, float, float]]]
+
+
+class ControlLoop:
+    """Poses in, behaviour objectives, MPC solve, commands out."""
+
+    def __init__(self, robot_names, settings):
+        self.names = list(robot_names)
+        self.settings = settings
+        self.poses = PoseBook(self.names, settings.pose_timeout)
+        self.behaviors = BehaviorManager(self.names, settings)
+        self.mpc = MultiRobotMPC(settings, len(self.names)).setup()
+        self._last_cmd = np.zeros((len(self.names), 2))
+
+    def on_pose(self, name, stamp, x, y, yaw):
+        return self.poses.update(name, stamp, x, y, yaw)
+
+    def step(self, now):
+        n = len(self.names)
+        poses = {name: self.poses.fresh(name, now) for name in self.names}
+        status = self.behaviors.update(now, poses)
+        stale = [name for name in self.names if poses[name] is None]
+        if len(stale) == n:
+            self._last_cmd[:] = 0.0
+            result = MPCResult(np.zeros((n, 2)), np.zeros((n, self.settings.horizon + 1, NX)),
+                               False, "no fresh pose for any robot", 0.0, 0, float("nan"), fallback="stop")
+            return self._output(result, status, stale, poses)
+
+        obj = self.behaviors.objectives()
+        obj = replace(obj, goal_mask=obj.goal_mask.copy(), velocity=obj.velocity.copy(),
+                      velocity_mask=obj.velocity_mask.copy())
+        x0 = np.zeros((n, NX))
+        for i, name in enumerate(self.names):
+            pose = poses[name]
+            if pose is None:
+                obj.goal_mask[i], obj.velocity_mask[i] = False, True
+                obj.velocity[i] = 0.0
+                self._last_cmd[i] = 0.0
+                latest = self.poses.latest(name)
+                pose = (latest.x, latest.y, latest.yaw) if latest else (0.0, 0.0, 0.0)
+            x0[i, :3] = pose
+            x0[i, 3:] = self._last_cmd[i]
+        result = self.mpc.make_step(x0, obj)
+        for i, name in enumerate(self.names):
+            if poses[name] is None:
+                result.commands[i] = 0.0
+        self._last_cmd = result.commands.copy()
+        return self._output(result, status, stale, poses)
+
+    def _output(self, result, status, stale, poses):
+        commands = {name: (float(result.commands[i, 0]), float(result.commands[i, 1]))
+                    for i, name in enumerate(self.names)}
+        return StepOutput(commands, result, status, stale, poses)

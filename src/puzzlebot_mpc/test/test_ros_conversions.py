@@ -1,0 +1,60 @@
+"""Message round trips (serialisation) and core <-> message conversions; no roscore."""
+
+from io import BytesIO
+
+from geometry_msgs.msg import Point, Pose2D
+from puzzlebot_msgs.msg import BehaviorStatus, ConnectionPair, ConnectionPairArray
+from puzzlebot_msgs.srv import SetBehaviorRequest
+
+from puzzlebot_mpc import behaviors
+from puzzlebot_mpc.behaviors import BehaviorStatus as CoreStatus
+from puzzlebot_mpc.controller import MPCResult
+from puzzlebot_mpc.ros_conversions import behavior_status_msg, request_from_srv, solver_stats_msg, twist
+
+import numpy as np
+import rospy
+
+
+def round_trip(msg):
+    buf = BytesIO()
+    msg.serialize(buf)
+    out = type(msg)()
+    out.deserialize(buf.getvalue())
+    return out
+
+
+def test_connection_pair_array_round_trip():
+    pair = ConnectionPair(robot_i="pz1", robot_j="pz2", point_i=Pose2D(-0.025, 0.0, 3.14159),
+                          point_j=Pose2D(0.025, 0.0, 0.0), type=ConnectionPair.TYPE_ANCHOR,
+                          anchor_robot="pz1", status=ConnectionPair.STATUS_HEAD_ALIGNED)
+    arr = ConnectionPairArray(pairs=[pair, ConnectionPair(robot_i="pz2", robot_j="pz3", type=ConnectionPair.TYPE_KNOB)])
+    arr.header.frame_id = "world"
+    back = round_trip(arr)
+    assert back.pairs[0].robot_i == "pz1" and back.pairs[0].point_i.x == -0.025
+    assert back.pairs[0].status == ConnectionPair.STATUS_HEAD_ALIGNED
+    assert back.pairs[1].type == ConnectionPair.TYPE_KNOB and back.header.frame_id == "world"
+
+
+def test_status_constants_match_core():
+    assert (BehaviorStatus.IDLE, BehaviorStatus.RUNNING, BehaviorStatus.SUCCEEDED, BehaviorStatus.FAILED) == (
+        behaviors.IDLE, behaviors.RUNNING, behaviors.SUCCEEDED, behaviors.FAILED)
+    assert (SetBehaviorRequest.GO_TO_GOAL, SetBehaviorRequest.FOLLOW_VELOCITY, SetBehaviorRequest.STOP) == (
+        behaviors.GO_TO_GOAL, behaviors.FOLLOW_VELOCITY, behaviors.STOP)
+
+
+def test_request_conversion():
+    req = SetBehaviorRequest(behavior="go_to_goal", robots=["pz1", "pz2"],
+                             goals=[Point(0.1, 0.2, 0.0), Point(-0.3, 0.4, 9.0)], tolerance=0.004)
+    req.velocities = [twist(0.01, 0.5)]
+    core = request_from_srv(round_trip(req))
+    assert core.robots == ["pz1", "pz2"] and core.goals == [(0.1, 0.2), (-0.3, 0.4)]
+    assert core.velocities == [(0.01, 0.5)] and core.tolerance == 0.004
+
+
+def test_stats_and_status_messages():
+    res = MPCResult(np.zeros((2, 2)), np.zeros((2, 3, 5)), False, "Infeasible", 12.5, 7, float("nan"), "stop")
+    msg = round_trip(solver_stats_msg(res, rospy.Time(3, 5), "ipopt", 2, 13.0))
+    assert (msg.success, msg.fallback, msg.solve_time_ms, msg.robots) == (False, "stop", 12.5, 2)
+    assert msg.header.stamp == rospy.Time(3, 5)
+    st = round_trip(behavior_status_msg(CoreStatus(4, "go_to_goal", 1, "started", ["pz1"], [0.01]), rospy.Time(1)))
+    assert (st.request_id, st.state, st.robots, list(st.errors)) == (4, 1, ["pz1"], [0.01])

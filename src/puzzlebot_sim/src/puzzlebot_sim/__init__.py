@@ -1,0 +1,1 @@
+"""PuzzleBot Bullet simulation: ROS-free core (robot URDF, worlds, stepping)."""
