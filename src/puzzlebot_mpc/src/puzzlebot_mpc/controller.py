@@ -246,11 +246,13 @@ class MultiRobotMPC:
             self._warm = None
             return MPCResult(np.zeros((n, 2)), np.zeros((n, h + 1, NX)), False, status, solve_ms, qp_iters,
                              float("nan"), fallback="stop", extra={"structure_pairs": len(key)})
-        self._warm = (built.st, z, x0)
         lay = built.lay
+        z[lay.slack] = np.maximum(z[lay.slack], 0.0)    # interior-point bound tolerance (~1e-8) x penalty
+        self._warm = (built.st, z, x0)
         U = lay.inputs(z)
         X = self._rollout(x0, z[lay.x_idx[0, :, 3:]], U)
         commands = X[:, 0, 3:5].copy()
+        commands[np.abs(commands) < s.command_zero] = 0.0      # interior-point noise: at rest means exactly 0
         cost = float(built.cost_fn(z, p))
         sp_idx = lay.sp_idx[lay.sp_idx >= 0]
         sb_idx = lay.sb_idx[lay.sb_idx >= 0]

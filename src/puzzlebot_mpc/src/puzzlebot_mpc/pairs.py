@@ -318,47 +318,41 @@ class PairBook:
         """Choose the active pairs among the goals (robots with a pose only).
 
         Conflict-free (a robot is in one active pair) and *growing one
-        assembly*: once the goal robots include an assembly of two or more
-        robots (the seed: the largest, ties broken by priority), only pairs
-        joining a single robot to it are eligible. Two multi-robot
-        assemblies are never joined: a straight chain of unicycles can only
-        turn through its couplings' freedom, so docking one chain onto
-        another is a hard manoeuvre, while a single robot docks easily.
-        Before any assembly exists, the best pair alone is chosen (it
-        becomes the seed).
+        assembly*: a single robot docks onto an assembly of two or more (the
+        seed: the largest that has such a pair, ties broken by priority),
+        several at once where the seed has several free places. Before any
+        assembly exists, the best pair alone is chosen (it becomes the seed).
+        Two multi-robot assemblies are joined only when nothing else is left:
+        a straight chain of unicycles can only turn through its couplings'
+        freedom, so docking one chain onto another is a hard manoeuvre, while a
+        single robot docks easily.
         """
         missing = {n for n, p in poses.items() if p is None}
         order = (lambda p: self.priority.get(p.key, 0.0)) if self.priority else None
-        goal_robots = {r for p in self.goals for r in p.robots}
-        coupled = list(self.coupled.values())
-        groups = [g for g in components(sorted(goal_robots | {r for p in coupled for r in p.robots}), coupled)
-                  if len(g) > 1 and set(g) & goal_robots]
         ranked = sorted(self.goals, key=order) if order else list(self.goals)
-        if groups:
-            best = {}
-            for g in groups:
-                best[tuple(g)] = min((k for k, p in enumerate(ranked) if set(p.robots) & set(g)), default=len(ranked))
-            seed = set(max(groups, key=lambda g: (len(g), -best[tuple(g)])))
-            eligible = [p for p in ranked if len(set(p.robots) & seed) == 1
-                        and not any(set(p.robots) - seed <= set(g) for g in groups if not seed & set(g))]
+        coupled = list(self.coupled.values())
+        group_of = {}
+        for g in components(sorted({r for p in coupled for r in p.robots}), coupled):
+            for r in g:
+                group_of[r] = tuple(g)
+        grow, single, join = [], [], []
+        for p in ranked:
+            gi, gj = group_of.get(p.robot_i), group_of.get(p.robot_j)
+            (single if gi is None and gj is None else grow if (gi is None) != (gj is None) else join).append(p)
+        if grow:
+            def seed_key(g):
+                return (len(g), -min(k for k, p in enumerate(grow) if set(p.robots) & set(g)))
+            seeds = {group_of.get(p.robot_i) or group_of.get(p.robot_j) for p in grow}
+            seed = set(max(seeds, key=seed_key))
+            eligible = [p for p in grow if set(p.robots) & seed]
         else:
-            eligible = ranked[:1]
+            eligible = (single or join)[:1]
         # Pairs already being aligned keep their place: switching partners mid-way wastes the approach.
         keep = [p for p in self.active if p in eligible and not (set(p.robots) & missing)]
         busy = {r for p in keep for r in p.robots} | missing
         rest = [p for p in eligible if p not in keep]
         self.active = keep + select_active(rest, busy)
         return self.active
-
-    def seed(self):
-        """Robots of the assembly the active pairs grow (empty before the first coupling)."""
-        coupled = list(self.coupled.values())
-        for p in self.active:
-            for r in p.robots:
-                g = assembly_of(r, sorted({x for q in coupled for x in q.robots} | {r}), coupled)
-                if len(g) > 1:
-                    return set(g)
-        return set()
 
     def update(self, poses):
         """Algorithm 2 on the active pairs, then the coupled-pair watchdog.

@@ -47,6 +47,7 @@ class MPCSettings:
     sqp_iterations_cold: int = 3     # QPs per step after a cold start
     max_iter: int = 100              # solver iteration cap per QP / NLP
     qp_tolerance: float = 1.0e-6     # Clarabel's gap and feasibility tolerances
+    command_zero: float = 1.0e-5     # m/s, rad/s: smaller commands are sent as exact zeros (solver noise)
     goal_tolerance: float = 0.005    # m: default success radius of go_to_goal
     pose_timeout: float = 0.5        # s: a pose older than this is stale; the robot is stopped
     approach_lookahead: float = 0.04      # m: the approach target leads the opening robot by this along the axis
@@ -71,7 +72,7 @@ class MPCSettings:
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "pair_epsilon", "pair_lost_margin", "wiggle_period",
-                                "slack_regularisation", "qp_tolerance", "w_slack_pip", "w_slack_butterfly"], where)
+                                "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip", "w_slack_butterfly"], where)
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
