@@ -98,3 +98,11 @@ def test_stale_pose_zeroes_one_robot_and_resets_its_integrator():
     assert d["a0"].reason == safety.POSE_STALE and (d["a0"].left, d["a0"].right) == (0, 0)
     assert c.controllers["a0"].i_v == 0.0
     assert d["a1"].reason == safety.DRIVE and d["a1"].left > 0
+
+
+def test_future_stamps_are_rejected_clock_check():
+    c = core()
+    assert c.on_pose("a0", 10.04, 0, 0, 0, now=10.0) is None
+    msg = c.on_pose("a0", 10.5, 0, 0, 0, now=10.0)
+    assert "future" in msg and "synchronised" in msg
+    assert c.robots["a0"].pose[0] == 10.04

@@ -70,11 +70,20 @@ class DriverCore:
         self.estop_reason = ""
 
     # ------------------------------------------------------------------ inputs
-    def on_pose(self, name, stamp, x, y, yaw):
-        """A mocap pose; returns None if accepted, else why it was not."""
+    def on_pose(self, name, stamp, x, y, yaw, now=None):
+        """A mocap pose; returns None if accepted, else why it was not.
+
+        With ``now`` (the driver's clock at arrival), a stamp more than
+        ``max_clock_skew`` in the future is rejected: the staleness rule
+        needs the mocap clock and the driver's clock to agree.
+        """
         state = self.robots.get(name)
         if state is None:
             return "pose for unknown robot %r" % name
+        if now is not None and stamp - now > self.params.max_clock_skew:
+            state.rejected_poses += 1
+            return ("%s: pose stamped %.3f s in the future; is the mocap clock synchronised with this "
+                    "machine?" % (name, stamp - now))
         reason = self.estimators[name].update(stamp, x, y, yaw)
         if reason is not None:
             state.rejected_poses += 1

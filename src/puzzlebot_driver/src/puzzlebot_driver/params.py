@@ -75,6 +75,7 @@ class DriverParams:
     w_limit: float = 6.0              # rad/s, |w| above is rejected (hardware limit)
     v_stop: float = 0.001             # m/s, |v| below and |w| below w_stop = a stop: PWM 0
     w_stop: float = 0.01              # rad/s
+    max_clock_skew: float = 0.05      # s, a pose stamped further in the future is rejected
     estimator_window: float = 0.05    # s, span of the finite difference over mocap poses
     estimator_tau: float = 0.03       # s, low-pass time constant of the estimate (0: none)
     estimator_max_gap: float = 0.2    # s, a longer gap between poses restarts the estimate
@@ -96,7 +97,7 @@ class DriverParams:
                                 "keepalive_count", "send_stall_timeout"], where)
         if not 0 <= self.port <= 65535:
             raise ConfigError("%s.port: expected 0..65535, got %r" % (where, self.port))
-        for key in ("v_stop", "w_stop", "estimator_tau"):
+        for key in ("v_stop", "w_stop", "estimator_tau", "max_clock_skew"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
         if self.estimator_max_gap <= self.estimator_window:

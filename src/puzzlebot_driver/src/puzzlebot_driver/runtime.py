@@ -31,6 +31,7 @@ class DriverRuntime:
         self.stopping = False
         self.late_ticks = 0
         self._late_logged = -1e9
+        self._old_logged = {}
 
     def start(self):
         """Listen for robots (raises link.LinkError if the port cannot be used)."""
@@ -39,8 +40,17 @@ class DriverRuntime:
 
     # ------------------------------------------------------------------ inputs
     def on_pose(self, name, stamp, x, y, yaw):
+        """A mocap pose (stamp = measurement time); None if accepted, else why not."""
+        now = self.clock()
         with self.lock:
-            return self.core.on_pose(name, stamp, x, y, yaw)
+            reason = self.core.on_pose(name, stamp, x, y, yaw, now)
+        age = now - stamp
+        if reason is None and age > self.params.pose_timeout and now - self._old_logged.get(name, -1e9) > 5.0:
+            self._old_logged[name] = now
+            self.log("warn", "pose of %s is %.3f s old on arrival (pose_timeout %.3f s): it is stale before it "
+                             "is used; is the mocap clock synchronised with this machine?"
+                     % (name, age, self.params.pose_timeout))
+        return reason
 
     def on_cmd(self, name, v, w):
         with self.lock:
