@@ -9,8 +9,6 @@ import socket
 import threading
 import time
 
-import pytest
-
 from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_driver.emulator import EmulatedFleet, start_poses
 from puzzlebot_driver.params import driver_config, emulator_config
