@@ -106,3 +106,18 @@ def test_future_stamps_are_rejected_clock_check():
     msg = c.on_pose("a0", 10.5, 0, 0, 0, now=10.0)
     assert "future" in msg and "synchronised" in msg
     assert c.robots["a0"].pose[0] == 10.04
+
+
+def test_a_robot_without_link_does_not_wind_up():
+    c = core()
+    for k in range(30):
+        c.on_pose("a0", 1.0 + 0.01 * k, 0.0, 0.0, 0.0)      # standing still
+    c.on_cmd("a0", 1.29, 0.05, 0.0)
+    for k in range(30):
+        d = c.tick(1.29 + k / 300, 1 / 30, connected=set())["a0"]
+    assert d.reason == safety.NO_LINK and (d.left, d.right) == (0, 0)
+    assert c.controllers["a0"].i_v == 0.0
+    d = c.tick(1.29, 1 / 30, connected={"a0"})["a0"]
+    assert d.reason == safety.DRIVE
+    assert d.left == pytest.approx(c.controllers["a0"].gains.pwm_per_v * 0.05 * (1 + c.controllers["a0"].gains.kp_v),
+                                   abs=2)

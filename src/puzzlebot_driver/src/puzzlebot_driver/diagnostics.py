@@ -33,7 +33,8 @@ def robot_status(state, link, estimate, now, params, prefix="puzzlebot_driver"):
     d = state.decision
     connected = bool(link and link.connected)
     if not connected:
-        level, message = WARN, "not connected (robot keeps its last PWM if it was connected before)"
+        level, message = WARN, ("not connected" if not (link and link.connects) else
+                                "link lost (the robot keeps its last PWM until it reconnects)")
     elif d.reason == safety.DRIVE:
         level, message = OK, "driving" + (" (PWM saturated)" if d.saturated else "")
     elif d.reason in (safety.STOP, safety.NO_COMMAND):

@@ -122,13 +122,15 @@ class DriverCore:
     def estimate(self, name):
         return self.estimators[name].velocity()
 
-    def tick(self, now, dt):
-        """Decide every robot's PWM at time ``now``; ``dt`` [s] since the previous tick."""
+    def tick(self, now, dt, connected=None):
+        """Decide every robot's PWM at time ``now``; ``dt`` [s] since the previous tick;
+        ``connected``: names of the robots with a link (None: all)."""
         out = {}
         for name in self.order:
             state = self.robots[name]
+            linked = connected is None or name in connected
             reason = safety.zero_reason(now, self.estop, state.pose[0] if state.pose else None, state.cmd,
-                                        state.cmd_time, state.cmd_rejected, self.params)
+                                        state.cmd_time, state.cmd_rejected, self.params, linked)
             ctrl = self.controllers[name]
             if reason != safety.DRIVE:
                 ctrl.reset()
@@ -139,12 +141,6 @@ class DriverCore:
             state.decision = decision
             out[name] = decision
         return out
-
-    def zero_all(self):
-        """Zero decisions for every robot (shutdown, e-stop)."""
-        for ctrl in self.controllers.values():
-            ctrl.reset()
-        return {name: Decision(0, 0, safety.ESTOP) for name in self.order}
 
 
 class LoopStats:

@@ -151,13 +151,15 @@ def driver_config(data, robots, where="driver"):
         if spec.ip_octet is None:
             raise ConfigError("robot %s has no ip_octet in the robot list: the driver identifies a "
                               "robot's TCP link by the last octet of its IP" % spec.name)
-        values = asdict(base)
+        values, source = asdict(base), where + ".control"
         if spec.pilot:
             values.update(pilot_over)
+            source = where + ".pilot"
         own = _mapping(per_robot.get(spec.name), "%s.robots.%s" % (where, spec.name))
-        values.update(own)
-        gains[spec.name] = ControlGains.from_dict(values, "%s.robots.%s" % (where, spec.name)
-                                                  if own else where + (".pilot" if spec.pilot else ".control"))
+        if own:
+            values.update(own)
+            source = "%s.robots.%s" % (where, spec.name)
+        gains[spec.name] = ControlGains.from_dict(values, source)
     unused = tuple(sorted(str(k) for k in set(per_robot) - {s.name for s in robots}))
     return DriverConfig(params, gains, unused)
 

@@ -72,7 +72,7 @@ class DriverRuntime:
         with self.lock:
             if self.stopping:
                 return None
-            decisions = self.core.tick(now, dt)
+            decisions = self.core.tick(now, dt, set(self.server.connected_names()))
             sent = {name: self.server.send(name, d.left, d.right) for name, d in decisions.items()}
         return now, decisions, sent
 

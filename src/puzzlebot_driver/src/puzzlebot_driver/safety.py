@@ -8,6 +8,7 @@ the first rule that applies wins:
 reason               rule
 ===================  =======================================================
 ``estop``            the e-stop is engaged (latched until released)
+``no link``          the robot is not connected (nothing can be sent; the loop restarts clean)
 ``no pose``          no mocap pose received yet
 ``pose stale``       the latest pose's stamp is older than ``pose_timeout``
 ``no command``       no valid cmd_vel received yet
@@ -24,6 +25,7 @@ robot's integrators.
 import math
 
 ESTOP = "estop"
+NO_LINK = "no link"
 NO_POSE = "no pose"
 POSE_STALE = "pose stale"
 NO_COMMAND = "no command"
@@ -45,15 +47,18 @@ def check_command(v, w, params):
     return None
 
 
-def zero_reason(now, estop, pose_stamp, cmd, cmd_time, cmd_rejected, params):
+def zero_reason(now, estop, pose_stamp, cmd, cmd_time, cmd_rejected, params, linked=True):
     """Why the robot gets zero PWM at time ``now`` [s], or DRIVE.
 
     ``pose_stamp``: stamp of the latest accepted pose (None if none);
     ``cmd``: latest (v, w) accepted, ``cmd_time``: when it arrived (None if
-    none); ``cmd_rejected``: the latest command was rejected.
+    none); ``cmd_rejected``: the latest command was rejected; ``linked``:
+    the robot is connected.
     """
     if estop:
         return ESTOP
+    if not linked:
+        return NO_LINK
     if pose_stamp is None:
         return NO_POSE
     if now - pose_stamp > params.pose_timeout:
