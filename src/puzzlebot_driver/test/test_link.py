@@ -36,3 +36,31 @@ def test_not_connected_is_reported_not_fatal():
     assert server.send("p21", 10, 10) is False
     assert server.send("ghost", 0, 0) is False
     assert server.link_info("p21").connected is False
+
+
+def test_a_new_connection_from_the_same_robot_replaces_the_old_one():
+    """An ESP8266 that rebooted reconnects while its old connection still looks open."""
+    import socket
+    import time
+
+    logs = []
+    server = PwmServer({21: "p21"}, host="127.0.0.1", port=0, log=lambda level, text: logs.append(text)).start()
+    try:
+        old = socket.create_connection(("127.0.0.1", server.port), source_address=("127.0.0.21", 0))
+        deadline = time.monotonic() + 2.0
+        while not server.connected("p21") and time.monotonic() < deadline:
+            time.sleep(0.01)
+        new = socket.create_connection(("127.0.0.1", server.port), source_address=("127.0.0.21", 0))
+        deadline = time.monotonic() + 2.0
+        while server.link_info("p21").connects < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert server.send("p21", 12, -34)
+        new.settimeout(2.0)
+        assert new.recv(100) == b"0012,-034\n"
+        old.settimeout(2.0)
+        assert old.recv(100) == b""                        # closed by the server
+        assert any("replaced by a new connection" in text for text in logs)
+    finally:
+        server.stop()
+        old.close()
+        new.close()

@@ -202,6 +202,10 @@ class PwmServer:
                            ("TCP_KEEPCNT", p.keepalive_count)):
             if hasattr(socket, opt):
                 sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, opt), max(1, int(round(value))))
+        if hasattr(socket, "TCP_USER_TIMEOUT"):
+            # A robot that vanished while we send (power off, out of range) never ACKs; without this
+            # the kernel retransmits for many minutes and the link would look up all that time.
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_USER_TIMEOUT, int(1000 * p.ack_timeout))
         sock.setblocking(False)
 
     def _accept(self):

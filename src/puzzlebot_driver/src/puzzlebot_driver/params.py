@@ -84,6 +84,7 @@ class DriverParams:
     keepalive_idle: float = 2.0       # s, TCP keepalive: a silent dead robot is dropped after
     keepalive_interval: float = 1.0   # s      idle + count * interval
     keepalive_count: int = 3
+    ack_timeout: float = 3.0          # s, data unacknowledged this long drops the link (TCP_USER_TIMEOUT)
     send_stall_timeout: float = 1.0   # s, a robot that accepts no data this long is disconnected
 
     @classmethod
@@ -94,7 +95,7 @@ class DriverParams:
         require_positive(self, ["loop_rate", "pose_timeout", "cmd_timeout", "v_limit", "w_limit",
                                 "estimator_window", "estimator_max_gap", "mocap_rate_window",
                                 "diagnostics_rate", "keepalive_idle", "keepalive_interval",
-                                "keepalive_count", "send_stall_timeout"], where)
+                                "keepalive_count", "ack_timeout", "send_stall_timeout"], where)
         if not 0 <= self.port <= 65535:
             raise ConfigError("%s.port: expected 0..65535, got %r" % (where, self.port))
         for key in ("v_stop", "w_stop", "estimator_tau", "max_clock_skew"):
