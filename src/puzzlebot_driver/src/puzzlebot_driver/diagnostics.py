@@ -27,9 +27,9 @@ def _fmt(x, spec="%.3f"):
     return "n/a" if x is None else spec % x
 
 
-def robot_status(state, link, estimate, now, params, prefix="puzzlebot_driver"):
+def robot_status(state, link, estimate, now, params, loop_rate=None, prefix="puzzlebot_driver"):
     """Status of one robot. ``state``: driver.RobotState; ``link``: link.LinkInfo or None;
-    ``estimate``: (v, w) or None; ``now``: clock time [s]."""
+    ``estimate``: (v, w) or None; ``now``: clock time [s]; ``loop_rate``: achieved [Hz]."""
     d = state.decision
     connected = bool(link and link.connected)
     if not connected:
@@ -64,6 +64,7 @@ def robot_status(state, link, estimate, now, params, prefix="puzzlebot_driver"):
         ("rejected commands", str(state.rejected_commands)),
         ("rejected poses", str(state.rejected_poses)),
         ("pilot", str(state.pilot).lower()),
+        ("loop rate [Hz]", _fmt(loop_rate, "%.2f")),
     ]
     return Status("%s: %s" % (prefix, state.name), level, message,
                   "%s (ip octet %d)" % (state.name, state.ip_octet), values)

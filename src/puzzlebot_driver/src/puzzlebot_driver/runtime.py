@@ -114,10 +114,11 @@ class DriverRuntime:
     def diagnostics(self):
         """Per-robot and loop statuses (diagnostics.Status)."""
         now = self.clock()
+        summary = self.stats.summary()
         with self.lock:
             out = [robot_status(self.core.robots[n], self.server.link_info(n), self.core.estimate(n), now,
-                                self.params) for n in self.core.order]
-            out.append(loop_status(self.stats.summary(), self.params, self.core.estop, self.core.estop_reason,
+                                self.params, summary["rate_hz"]) for n in self.core.order]
+            out.append(loop_status(summary, self.params, self.core.estop, self.core.estop_reason,
                                    self.server.rejected_connections))
         return out
 
