@@ -43,3 +43,35 @@ def base_frame(robot):
 def anchor_frame(robot):
     """Frame of the anchor body that rests in ``robot``'s holder."""
     return "%s/anchor" % robot
+
+
+# --- Lab driver and robot emulator (puzzlebot_driver; docs/driver.md) ---
+
+#: puzzlebot_msgs/EStop service of the lab driver: zero every robot's PWM, latched until released.
+DRIVER_ESTOP_SERVICE = STACK_NS + "/driver/estop"
+#: std_msgs/Bool topic: true engages the driver's e-stop (latched), false releases it.
+ESTOP_TOPIC = STACK_NS + "/estop"
+#: diagnostic_msgs/DiagnosticArray, the ROS-wide diagnostics topic.
+DIAGNOSTICS_TOPIC = "/diagnostics"
+#: puzzlebot_msgs/EmulatorFault service of the robot emulator.
+EMULATOR_FAULT_SERVICE = STACK_NS + "/emulator/fault"
+
+
+def wheel_pwm_topic(robot):
+    """PWM the lab driver decides for ``robot`` every loop tick (puzzlebot_msgs/WheelPwm)."""
+    return "/%s/wheel_pwm" % robot
+
+
+def emulator_pwm_topic(robot):
+    """PWM lines the emulated ``robot`` received (puzzlebot_msgs/WheelPwm, stamped on arrival)."""
+    return STACK_NS + "/emulator/%s/pwm" % robot
+
+
+def emulator_truth_topic(robot):
+    """True pose of the emulated ``robot`` (geometry_msgs/TransformStamped, world frame, no noise)."""
+    return STACK_NS + "/emulator/%s/true_pose" % robot
+
+
+def emulator_velocity_topic(robot):
+    """True body velocity of the emulated ``robot`` (geometry_msgs/TwistStamped: linear.x, angular.z)."""
+    return STACK_NS + "/emulator/%s/true_velocity" % robot
