@@ -12,6 +12,7 @@ statistics.
 
     python -m puzzlebot_mpc.bench --robots 8 --horizon 10 --json
     python -m puzzlebot_mpc.bench --grid --out build/bench/mpc_bench.json
+    python -m puzzlebot_mpc.bench --robots 4 --couple-trials 24   # coupling success rate
 """
 
 import argparse
@@ -106,6 +107,53 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
             "qp_iterations_median": float(np.median(qp_iterations))}
 
 
+def couple_trials(robots, trials, seed=0, timeout=120.0, settings=None):
+    """Coupling success on the kinematic plant from random scattered starts.
+
+    Two robots: the paper's experiment -- 65 mm apart along x, y offsets
+    0..30 mm, headings within +-0.3 rad. More robots: spaced 90 mm along x
+    (+-20 mm), +-40 mm sideways, headings within +-0.6 rad; target "line".
+    Returns a dict: trials, coupled, coupling times [s], failed solves.
+    """
+    s = settings or load_settings()
+    geometry = RobotGeometry()
+    rng = np.random.default_rng(seed)
+    times, failures = [], 0
+    for trial in range(trials):
+        names = ["c%d" % (k + 1) for k in range(robots)]
+        if robots == 2:
+            offset = 0.030 * trial / max(1, trials - 1)
+            poses = {names[0]: (0.0, 0.0, rng.uniform(-0.3, 0.3)),
+                     names[1]: (-0.065, offset, rng.uniform(-0.3, 0.3))}
+        else:
+            poses = {n: (-0.09 * k + rng.uniform(-0.02, 0.02), rng.uniform(-0.04, 0.04), rng.uniform(-0.6, 0.6))
+                     for k, n in enumerate(names)}
+        loop = ControlLoop(names, s, geometry)
+        t = 0.0
+        for name, p in poses.items():
+            loop.on_pose(name, t, *p)
+        rid = loop.request(BehaviorRequest("couple", names, target="line", timeout=timeout), t)
+        while t < timeout + 1.0:
+            out = loop.step(t)
+            failures += 0 if out.result.success else 1
+            for name in names:
+                v, w = out.commands[name]
+                p = poses[name]
+                for _ in range(PLANT_SUBSTEPS):
+                    p = unicycle_arc(p, v, w, s.dt / PLANT_SUBSTEPS)
+                poses[name] = tuple(p)
+            t += s.dt
+            for name, p in poses.items():
+                loop.on_pose(name, t, *p)
+            if out.status.request_id == rid and out.status.state != 1:
+                if out.status.state == 2:
+                    times.append(t)
+                break
+    return {"robots": robots, "trials": trials, "coupled": len(times),
+            "mean_s": round(float(np.mean(times)), 2) if times else None,
+            "max_s": round(float(np.max(times)), 2) if times else None, "failed_solves": failures}
+
+
 def machine():
     try:
         load = os.getloadavg()
@@ -141,7 +189,13 @@ def main(argv=None):
     ap.add_argument("--grid", action="store_true",
                     help="run N in %s x Hm in %s and print the table" % (GRID_ROBOTS, GRID_HORIZONS))
     ap.add_argument("--out", action="append", default=[], help="with --grid: write the results as JSON here")
+    ap.add_argument("--couple-trials", type=int, default=0, metavar="T",
+                    help="instead: T coupling trials of --robots robots from random starts (kinematic plant)")
     args = ap.parse_args(argv)
+    if args.couple_trials > 0:
+        r = couple_trials(args.robots, args.couple_trials)
+        print(json.dumps(r))
+        return 0
     if args.robots < 2 or args.horizon < 1 or args.steps < 1 or args.constraint_horizon < 1:
         ap.error("need --robots >= 2, --horizon >= 1, --constraint-horizon >= 1, --steps >= 1")
     if not args.grid:

@@ -1,7 +1,9 @@
 """MPC settings with units, defaults and validation.
 
 Loaded from the ``mpc`` mapping of ``config/mpc.yaml`` (or the ROS parameter
-``~mpc``). Defaults are the paper's demo values (facts.md, "Control").
+``~mpc``). Limits are the paper's demo values (facts.md, "Control"); the
+weights start from the lab's values and docs/mpc.md says where and why they
+differ.
 """
 
 from dataclasses import dataclass
@@ -62,6 +64,7 @@ class MPCSettings:
     hold_scale: float = 100.0        # rest-weight scale of an assembly a single robot docks onto (holds still)
     follower_rest_scale: float = 0.1  # rest-cost scale (0..1) of robots dragged along by a coupled partner
     decouple_clearance: float = 0.003  # m: decoupled once the anchor head is this far outside the opening robot
+
     @classmethod
     def from_dict(cls, data, where="mpc"):
         """Validated settings from a mapping; unknown keys raise ConfigError."""
@@ -72,7 +75,8 @@ class MPCSettings:
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "pair_epsilon", "pair_lost_margin", "wiggle_period",
-                                "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip", "w_slack_butterfly"], where)
+                                "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip",
+                                "w_slack_butterfly"], where)
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
