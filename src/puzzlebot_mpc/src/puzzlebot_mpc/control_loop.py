@@ -103,6 +103,11 @@ class ControlLoop:
         """Validate and start a behaviour (behaviors.BehaviorManager.request) with the current poses."""
         return self.behaviors.request(req, now, self.fresh_poses(now))
 
+    def pair_keys(self):
+        """The current pair slots as robot index tuples (the MPC structure's key)."""
+        index = {n: i for i, n in enumerate(self.names)}
+        return [(index[p.robot_i], index[p.robot_j]) for p in self.behaviors.pair_slots()]
+
     def step(self, now):
         n = len(self.names)
         poses = self.fresh_poses(now)

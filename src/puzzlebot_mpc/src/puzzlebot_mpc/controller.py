@@ -191,6 +191,10 @@ class MultiRobotMPC:
         self._ready = True
         return self
 
+    def prepare(self, pairs):
+        """Build (once) the problem for a set of pair slots ((i, j) index tuples) ahead of its first step."""
+        self._get(tuple(sorted(pairs)))
+
     def _structure(self, pairs):
         s = self.settings
         return Structure(self.n, s.horizon, s.constraint_horizon, tuple(pairs))
