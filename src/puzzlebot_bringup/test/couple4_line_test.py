@@ -46,6 +46,9 @@ class CoupleFourIntoLine(unittest.TestCase):
         rospy.Subscriber("/puzzlebot/mpc/solver_stats", SolverStats, self.stats.append)
         rospy.wait_for_service("/puzzlebot/mpc/set_behavior", timeout=60.0)
         self.call = rospy.ServiceProxy("/puzzlebot/mpc/set_behavior", SetBehavior)
+        wall0 = time.monotonic()        # the MPC has poses once it solved a step (couple needs them)
+        while not any(s.success for s in self.stats) and time.monotonic() - wall0 < 60.0:
+            time.sleep(0.02)
 
     def on_pose(self, msg, name):
         t, q = msg.transform.translation, msg.transform.rotation

@@ -23,10 +23,16 @@ Solvers (``settings.solver``):
   Hessian, linearised dynamics and constraints) and solves that sparse QP
   with Clarabel's interior-point method. ``sqp_iterations`` QPs per step
   (1 = classic RTI), ``sqp_iterations_cold`` after a cold start.
+  The butterfly set is two cones; each stage uses the cone of the previous
+  plan's direction of travel. A robot at rest that must move (a goal, an
+  active pair) has no such direction: the first QP of the step is then
+  solved for both cones of up to ``butterfly_lobe_robots`` such robots and
+  the lower objective wins.
 - ``ipopt``: the full NLP of the same formulation, solved to convergence
   (built once, warm-started); slower, kept as the reference.
 """
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -166,7 +172,7 @@ class _Built:
         z = np.asarray(sol.x, dtype=float)
         if ok and not np.all(np.isfinite(z)):
             ok, status = False, status + " (non-finite solution)"
-        return (z if ok else None), status, int(sol.iterations)
+        return (z if ok else None), status, int(sol.iterations), float(sol.obj_val)
 
 
 class MultiRobotMPC:
@@ -232,14 +238,24 @@ class MultiRobotMPC:
         p = self._params(built, x0, objectives, pairs)
         iters = s.sqp_iterations_cold if cold else s.sqp_iterations
         status, qp_iters, z = "not solved", 0, None
+        lobes_tried = 1
         try:
-            for _ in range(iters):
-                self._set_butterfly_signs(built, p, zbar, x0, objectives, pairs)
-                if s.solver == "clarabel":
-                    z, status, it = built.clarabel_solve(s, zbar, p)
-                else:
-                    z, status, it = self._ipopt_solve(built, zbar, p)
-                qp_iters += it
+            for k in range(iters):
+                pref = self._preferred_direction(x0, objectives, pairs)
+                ambiguous = self._ambiguous(built, zbar, objectives, pairs) if k == 0 and s.butterfly else []
+                best = None
+                for signs in itertools.product((1.0, -1.0), repeat=len(ambiguous)):
+                    pref[ambiguous] = signs
+                    self._set_butterfly_signs(built, p, zbar, pref)
+                    zk, status, it, obj = self._solve_once(built, zbar, p)
+                    qp_iters += it
+                    if zk is None:
+                        best = None
+                        break
+                    if best is None or obj < best[1]:
+                        best = (zk, obj)
+                lobes_tried = max(lobes_tried, 2 ** len(ambiguous))
+                z = best[0] if best else None
                 if z is None:
                     break
                 zbar = z
@@ -260,7 +276,7 @@ class MultiRobotMPC:
         cost = float(built.cost_fn(z, p))
         sp_idx = lay.sp_idx[lay.sp_idx >= 0]
         sb_idx = lay.sb_idx[lay.sb_idx >= 0]
-        extra = {"structure_pairs": len(key),
+        extra = {"structure_pairs": len(key), "butterfly_lobes_tried": lobes_tried,
                  "max_pip_slack": float(z[sp_idx].max()) if sp_idx.size else 0.0,
                  "max_butterfly_slack": float(z[sb_idx].max()) if sb_idx.size else 0.0,
                  "sqp_iterations": iters}
@@ -385,16 +401,37 @@ class MultiRobotMPC:
             pref[j] = -1.0 if -(c[j] * d[0] + s[j] * d[1]) < 0 else 1.0
         return pref
 
-    def _set_butterfly_signs(self, built, p, zbar, x0, o, pairs):
+    def _lobe_threshold(self):
         s = self.settings
-        if not s.butterfly:
+        return 2.0 * s.w_free * s.v_max / s.w_max     # |v| below which the plan has no direction of travel
+
+    def _set_butterfly_signs(self, built, p, zbar, pref):
+        """Butterfly cone per stage: the previous plan's direction of travel, else ``pref``."""
+        if not self.settings.butterfly:
             return
-        lay, h = built.lay, s.horizon
-        vbar = zbar[lay.x_idx[:, :, 3]].T       # (n, H+1)
-        pref = self._preferred_direction(x0, o, pairs)
-        eps = 2.0 * s.w_free * s.v_max / s.w_max
-        sign = np.where(np.abs(vbar) > eps, np.sign(vbar), pref[:, None])
+        vbar = zbar[built.lay.x_idx[:, :, 3]].T       # (n, H+1)
+        sign = np.where(np.abs(vbar) > self._lobe_threshold(), np.sign(vbar), pref[:, None])
         built.par.put(p, "bsign", sign.reshape(-1))
+
+    def _ambiguous(self, built, zbar, o, pairs):
+        """Robots at rest in the plan that must move for their objective (a goal or an active pair,
+        without a velocity reference): which way they should start is not known, so both butterfly
+        lobes are tried (at most ``butterfly_lobe_robots`` robots, the first ones)."""
+        vbar = zbar[built.lay.x_idx[:2, :, 3]]         # stages 0 and 1
+        at_rest = np.all(np.abs(vbar) <= self._lobe_threshold(), axis=0)
+        movers = set(np.flatnonzero(np.asarray(o.goal_mask, bool)))
+        vm = np.asarray(o.velocity_mask, float)
+        free = ~np.any(vm.reshape(self.n, -1) > 0, axis=1)
+        for pr in pairs:
+            if pr.active:
+                movers.update(r for r in (pr.i, pr.j) if free[r])
+        return [i for i in sorted(movers) if at_rest[i]][:self.settings.butterfly_lobe_robots]
+
+    def _solve_once(self, built, zbar, p):
+        if self.settings.solver == "clarabel":
+            return built.clarabel_solve(self.settings, zbar, p)
+        z, status, it = self._ipopt_solve(built, zbar, p)
+        return z, status, it, (float(built.cost_fn(z, p)) if z is not None else float("inf"))
 
     def _ipopt_solve(self, built, zbar, p):
         b = built

@@ -47,6 +47,8 @@ class MPCSettings:
     solver: str = "clarabel"         # "clarabel" (real-time iteration, sparse QP) or "ipopt" (full NLP)
     sqp_iterations: int = 1          # QPs per step when warm (1 = real-time iteration)
     sqp_iterations_cold: int = 3     # QPs per step after a cold start
+    butterfly_lobe_robots: int = 2   # robots at rest whose direction of travel is chosen by trying both
+                                     # butterfly cones (2^k QPs in such a step); 0 = use the preference only
     max_iter: int = 100              # solver iteration cap per QP / NLP
     qp_tolerance: float = 1.0e-6     # Clarabel's gap and feasibility tolerances
     command_zero: float = 1.0e-5     # m/s, rad/s: smaller commands are sent as exact zeros (solver noise)
@@ -80,7 +82,7 @@ class MPCSettings:
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
-                    "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "follower_rest_scale", "hold_scale",
+                    "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "follower_rest_scale", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
