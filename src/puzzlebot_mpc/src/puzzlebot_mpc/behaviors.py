@@ -294,6 +294,10 @@ class BehaviorManager:
         margin = pr.head_margin(pair, pi, pj, self.geometry.footprint())
         return margin < -(self.settings.pair_epsilon + self.settings.decouple_clearance)
 
+    def coupling(self):
+        """True while a couple behaviour runs (active pairs are assigned every step)."""
+        return self._state == RUNNING and self._req.behavior == COUPLE
+
     # ----------------------------------------------------------- objectives
     def pair_slots(self):
         """Pairs that get a slot in the MPC this step: coupled, goals, the one being decoupled."""

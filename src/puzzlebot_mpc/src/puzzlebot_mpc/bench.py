@@ -70,8 +70,9 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
     min_margin = math.inf
     qp_iterations = []
     for k in range(steps + 1):
-        if k == steps // 2 + 1:
-            loop.behaviors._req.velocities = [(DRIVE_V, -DRIVE_W)]
+        if k == steps // 2 + 1:        # second half of the S-curve
+            loop.request(BehaviorRequest(DRIVE_ASSEMBLY, [names[0]], velocities=[(DRIVE_V, -DRIVE_W)],
+                                         timeout=(steps + 5) * s.dt), t)
         t0 = time.perf_counter()
         out = loop.step(t)
         ms = 1e3 * (time.perf_counter() - t0)

@@ -18,13 +18,13 @@ Safety rules, applied every step:
 """
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
-from puzzlebot_mpc.behaviors import COUPLE, RUNNING, BehaviorManager
+from puzzlebot_mpc.behaviors import BehaviorManager
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
 from puzzlebot_mpc.model import NX
 from puzzlebot_mpc.pairs import PairBook
@@ -119,7 +119,7 @@ class ControlLoop:
             result = MPCResult(np.zeros((n, 2)), np.zeros((n, self.settings.horizon + 1, NX)),
                                False, "no fresh pose for any robot", 0.0, 0, float("nan"), fallback="stop")
             return self._output(result, status, stale, poses, newly, lost)
-        if self.behaviors._state == RUNNING and self.behaviors._req.behavior == COUPLE:
+        if self.behaviors.coupling():
             self.pairs.assign_active(poses)
         obj = self.behaviors.objectives(now, poses)
         x0 = np.zeros((n, NX))

@@ -45,7 +45,7 @@ their relative heading within the connection's freedom (yaw_limit).
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -406,8 +406,3 @@ def assembly_of(robot, names, pairs):
         if robot in group:
             return group
     return [robot]
-
-
-def pair_tuple_sequence(pairs: Sequence[ConnectionPair], index):
-    """Structure key of a pair set: sorted (i, j) index tuples."""
-    return tuple(sorted((index[p.robot_i], index[p.robot_j]) for p in pairs))
