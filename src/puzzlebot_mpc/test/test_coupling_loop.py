@@ -145,3 +145,14 @@ def test_nan_or_missing_pose_refuses_couple():
         loop.request(BehaviorRequest("couple", target="line"), 0.0)
     out = loop.step(0.0)
     assert all(c == (0.0, 0.0) for c in out.commands.values())
+
+
+def test_two_robots_couple_side_by_side_with_a_knob_pair():
+    loop = ControlLoop(["k1", "k2"], MPCSettings())
+    plant = Plant(loop, {"k1": (0.0, 0.0, 0.0), "k2": (-0.01, 0.085, 0.2)})
+    status, elapsed = plant.run(BehaviorRequest("couple", target="row", timeout=60.0), 62.0)
+    assert status.state == SUCCEEDED, status.message
+    (key, pair), = loop.pairs.coupled.items()
+    assert pair.type == pr.KNOB and key == ("k1", "k2")          # k1's left knob in k2's right hole
+    assert plant.margin(pair) >= -MPCSettings().pair_epsilon
+    assert plant.failures == 0
