@@ -4,7 +4,7 @@ SHELL := /bin/bash
 ENV := scripts/env.sh
 ARGS ?=
 
-.PHONY: all setup build sim test test-unit test-ros clean
+.PHONY: all setup build sim test test-unit test-ros bench clean
 
 all: build
 
@@ -27,6 +27,10 @@ test-unit: build
 
 test-ros: build
 	@scripts/run_tests.sh ros
+
+## make bench: MPC step time for N in 2..32 x Hm in 3, 5, 10 (Hc = 3); table on screen, JSON in build/bench and docs
+bench: build
+	@$(ENV) rosrun puzzlebot_mpc bench --grid --out build/bench/mpc_bench.json --out docs/mpc_bench.json
 
 clean:
 	rm -rf build devel install

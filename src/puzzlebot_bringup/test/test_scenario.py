@@ -45,3 +45,30 @@ def test_summary_reports_outcome_and_errors():
     text, ok = format_summary(scenario, [StepResult(scenario.steps[0], "succeeded", "done", 5.0, {"pz1": 0.0031})],
                               wall_seconds=2.0, sim_seconds=5.0)
     assert not ok and "pz1 3.1 mm" in text and "1 later step(s) not run" in text and "2.5x" in text
+
+
+def test_coupling_steps_parse_and_check():
+    scenario = parse_scenario({"name": "c", "start": {}, "steps": [
+        {"behavior": "couple", "target": "line", "timeout": 60},
+        {"behavior": "drive_assembly", "robots": ["pz1"], "velocity": [0.03, 0.0], "distance": 0.3},
+        {"behavior": "decouple", "pair": ["pz1", "pz2"]}]}, ROBOTS)
+    couple, drive, decouple = scenario.steps
+    assert couple.target == "line" and couple.robots == [] and couple.timeout == 60.0
+    assert drive.velocities == [(0.03, 0.0)] and drive.distance == 0.3 and "0.300 m" in drive.describe()
+    assert decouple.pair == ["pz1", "pz2"] and decouple.describe() == "decouple pz1-pz2"
+
+
+@pytest.mark.parametrize("step, fragment", [
+    ({"behavior": "couple"}, "either 'target' or 'slots'"),
+    ({"behavior": "couple", "target": "line", "slots": [[0, 0, 0]]}, "either"),
+    ({"behavior": "couple", "slots": [[0, 0]]}, "3 finite"),
+    ({"behavior": "decouple", "pair": ["pz1"]}, "two robot names"),
+    ({"behavior": "decouple", "pair": ["pz1", "pz7"]}, "unknown robot"),
+    ({"behavior": "drive_assembly", "robots": ["pz1"], "velocity": [0.03, 0.0]}, "distance or a timeout"),
+    ({"behavior": "drive_assembly", "robots": ["pz1"], "velocity": [0.03], "distance": 1}, "2 finite"),
+    ({"behavior": "go_to_goal", "goals": {"pz1": [0, 0]}, "pair": ["pz1", "pz2"]}, "do not apply"),
+])
+def test_bad_coupling_steps_name_the_problem(step, fragment):
+    with pytest.raises(ConfigError) as e:
+        parse_scenario({"name": "x", "start": {}, "steps": [step]}, ROBOTS)
+    assert fragment in str(e.value)

@@ -58,3 +58,42 @@ def test_stats_and_status_messages():
     assert msg.header.stamp == rospy.Time(3, 5)
     st = round_trip(behavior_status_msg(CoreStatus(4, "go_to_goal", 1, "started", ["pz1"], [0.01]), rospy.Time(1)))
     assert (st.request_id, st.state, st.robots, list(st.errors)) == (4, 1, ["pz1"], [0.01])
+
+
+def test_coupling_request_fields_convert():
+    from geometry_msgs.msg import Pose2D as P2
+    req = SetBehaviorRequest(behavior=SetBehaviorRequest.COUPLE, robots=["pz1", "pz2"], target="",
+                             slots=[P2(0.0, 0.0, 0.0), P2(-0.05, 0.0, 0.0)])
+    core = request_from_srv(round_trip(req))
+    assert core.behavior == behaviors.COUPLE and core.slots == [(0.0, 0.0, 0.0), (-0.05, 0.0, 0.0)]
+    req = SetBehaviorRequest(behavior=SetBehaviorRequest.DECOUPLE, pair=["pz2", "pz3"])
+    assert request_from_srv(round_trip(req)).pair == ["pz2", "pz3"]
+    req = SetBehaviorRequest(behavior=SetBehaviorRequest.DRIVE_ASSEMBLY, robots=["pz1"], distance=0.3)
+    req.velocities = [twist(0.03, 0.0)]
+    core = request_from_srv(round_trip(req))
+    assert core.distance == 0.3 and core.velocities == [(0.03, 0.0)]
+    assert (SetBehaviorRequest.COUPLE, SetBehaviorRequest.DECOUPLE, SetBehaviorRequest.DRIVE_ASSEMBLY) == (
+        behaviors.COUPLE, behaviors.DECOUPLE, behaviors.DRIVE_ASSEMBLY)
+
+
+def test_pairs_predicted_and_markers_messages():
+    from puzzlebot_common.geometry import RobotGeometry
+    from puzzlebot_mpc.pairs import ANCHOR, HEAD_INSERTED, make_pair
+    from puzzlebot_mpc.ros_conversions import markers_msg, pairs_msg, predicted_msg
+
+    geo = RobotGeometry()
+    pair = make_pair("pz1", "pz2", ANCHOR, geo, status=HEAD_INSERTED)
+    msg = round_trip(pairs_msg([pair], rospy.Time(2, 0)))
+    assert msg.pairs[0].anchor_robot == "pz1" and msg.pairs[0].status == ConnectionPair.STATUS_HEAD_INSERTED
+    assert msg.pairs[0].point_i.x == -0.025 and msg.header.frame_id == "world"
+    X = np.zeros((2, 4, 5))
+    X[0, :, 0] = [0.0, 0.01, 0.02, 0.03]
+    res = MPCResult(np.zeros((2, 2)), X, True, "Solved", 1.0, 10, 0.5)
+    pred = round_trip(predicted_msg(res, ["pz1", "pz2"], rospy.Time(2, 0), 0.1))
+    assert [r.robot for r in pred.robots] == ["pz1", "pz2"] and len(pred.robots[0].poses) == 4
+    assert pred.robots[0].poses[3].x == 0.03 and pred.dt == 0.1
+    failed = MPCResult(np.zeros((2, 2)), X, False, "x", 1.0, 0, float("nan"), fallback="stop")
+    assert predicted_msg(failed, ["pz1", "pz2"], rospy.Time(2, 0), 0.1).robots == []
+    poses = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.05, 0.0, 0.0)}
+    markers = markers_msg(res, ["pz1", "pz2"], [pair], poses, rospy.Time(2, 0))
+    assert [m.ns for m in markers.markers[1:]] == ["predicted", "predicted", "pairs"]

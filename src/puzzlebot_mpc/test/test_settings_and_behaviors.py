@@ -73,6 +73,6 @@ def test_unrequested_robots_are_stopped():
     m = manager()
     m.request(BehaviorRequest("follow_velocity", ["pz2"], velocities=[(0.03, 0.2)]), now=0.0)
     o = m.objectives()
-    assert list(o.velocity_mask) == [True, True, True]
+    assert (o.velocity_mask > 0).all()
     assert o.velocity[1] == pytest.approx([0.03, 0.2])
     assert o.velocity[0] == pytest.approx([0, 0]) and o.velocity[2] == pytest.approx([0, 0])

@@ -18,6 +18,19 @@ robot list and the scenario::
           velocities: {pz1: [v, w]}      # m/s, rad/s
           timeout: 3.0                   # s: how long to follow it
         - behavior: stop
+        - behavior: couple                 # robots form a target configuration
+          robots: [pz1, pz2]               # (optional: all robots)
+          target: line                     # line, row, a name from puzzlebot_mpc/config/targets.yaml ...
+          slots: [[0, 0, 0], [-0.05, 0, 0]]  # ... or explicit slots [x, y, heading] (m, m, rad)
+          timeout: 120.0
+        - behavior: drive_assembly         # the assembly of the first robot drives as one body
+          robots: [pz1]
+          velocity: [0.03, 0.0]            # m/s, rad/s in pz1's frame
+          distance: 0.3                    # m (or give only a timeout: a duration)
+          timeout: 30.0
+        - behavior: decouple               # a coupled pair separates (its anchor robot wiggles)
+          pair: [pz2, pz3]
+          timeout: 60.0
 
 This module parses and checks scenarios and formats the end-of-run summary.
 """
@@ -28,8 +41,12 @@ from typing import Dict, List, Optional, Tuple
 
 from puzzlebot_common.errors import ConfigError
 
-STEP_KEYS = {"behavior", "goals", "velocities", "tolerance", "timeout"}
-BEHAVIORS = ("go_to_goal", "follow_velocity", "stop")
+STEP_KEYS = {"behavior", "goals", "velocities", "tolerance", "timeout", "robots", "target", "slots", "pair",
+             "velocity", "distance"}
+BEHAVIORS = ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly")
+_KEYS_OF = {"go_to_goal": {"goals", "tolerance", "timeout"}, "follow_velocity": {"velocities", "timeout"},
+            "stop": {"timeout"}, "couple": {"robots", "target", "slots", "timeout"},
+            "decouple": {"pair", "timeout"}, "drive_assembly": {"robots", "velocity", "distance", "timeout"}}
 
 
 @dataclass
@@ -40,6 +57,10 @@ class Step:
     velocities: List[Tuple[float, float]] = field(default_factory=list)
     tolerance: float = 0.0
     timeout: float = 0.0
+    target: str = ""
+    slots: List[Tuple[float, float, float]] = field(default_factory=list)
+    pair: List[str] = field(default_factory=list)
+    distance: float = 0.0
 
     def describe(self):
         if self.behavior == "go_to_goal":
@@ -48,6 +69,15 @@ class Step:
         if self.behavior == "follow_velocity":
             return "follow_velocity %.1f s " % self.timeout + ", ".join(
                 "%s (%.3f m/s, %.2f rad/s)" % (r, v[0], v[1]) for r, v in zip(self.robots, self.velocities))
+        if self.behavior == "couple":
+            return "couple %s into %s" % (", ".join(self.robots) or "all robots",
+                                          self.target or "%d slots" % len(self.slots))
+        if self.behavior == "decouple":
+            return "decouple %s-%s" % tuple(self.pair)
+        if self.behavior == "drive_assembly":
+            v, w = self.velocities[0]
+            how = "%.3f m" % self.distance if self.distance > 0 else "%.1f s" % self.timeout
+            return "drive_assembly of %s at (%.3f m/s, %.2f rad/s) for %s" % (self.robots[0], v, w, how)
         return self.behavior
 
 
@@ -66,6 +96,7 @@ class StepResult:
     message: str
     sim_seconds: float
     final_errors: Dict[str, float] = field(default_factory=dict)
+    pairs: str = ""              # connection pairs at the end of the step (coupling steps)
 
 
 def _pairs(value, where, robots, width):
@@ -82,6 +113,22 @@ def _pairs(value, where, robots, width):
         out_r.append(name)
         out_v.append(tuple(float(v) for v in vec))
     return out_r, out_v
+
+
+def _numbers(value, width, where):
+    if not isinstance(value, (list, tuple)) or len(value) != width or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        raise ConfigError("%s: expected %d finite numbers, got %r" % (where, width, value))
+    return [float(v) for v in value]
+
+
+def _names(value, where, robots, allow_empty=False):
+    if not isinstance(value, list) or (not value and not allow_empty):
+        raise ConfigError("%s: expected a list of robot names, got %r" % (where, value))
+    for name in value:
+        if name not in robots:
+            raise ConfigError("%s: unknown robot %r; robots: %s" % (where, name, ", ".join(robots)))
+    return list(value)
 
 
 def parse_scenario(data, robots, where="scenario"):
@@ -105,8 +152,11 @@ def parse_scenario(data, robots, where="scenario"):
         behavior = s["behavior"]
         if behavior not in BEHAVIORS:
             raise ConfigError("%s.behavior: unknown behaviour %r; known: %s" % (w, behavior, ", ".join(BEHAVIORS)))
+        misplaced = set(s) - _KEYS_OF[behavior] - {"behavior"}
+        if misplaced:
+            raise ConfigError("%s: key(s) %s do not apply to %s" % (w, ", ".join(sorted(misplaced)), behavior))
         step = Step(behavior)
-        for key in ("tolerance", "timeout"):
+        for key in ("tolerance", "timeout", "distance"):
             value = s.get(key, 0.0)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                     or value < 0:
@@ -118,6 +168,23 @@ def parse_scenario(data, robots, where="scenario"):
             step.robots, step.velocities = _pairs(s.get("velocities"), w + ".velocities", robots, 2)
             if step.timeout <= 0:
                 raise ConfigError("%s.timeout: follow_velocity needs a duration > 0" % w)
+        elif behavior == "couple":
+            step.robots = _names(s.get("robots", []), w + ".robots", robots, allow_empty=True)
+            step.target = s.get("target", "")
+            if not isinstance(step.target, str):
+                raise ConfigError("%s.target: expected a target name, got %r" % (w, step.target))
+            step.slots = [tuple(_numbers(sl, 3, "%s.slots[%d]" % (w, k))) for k, sl in enumerate(s.get("slots", []))]
+            if bool(step.target) == bool(step.slots):
+                raise ConfigError("%s: couple needs either 'target' or 'slots'" % w)
+        elif behavior == "decouple":
+            step.pair = _names(s.get("pair"), w + ".pair", robots)
+            if len(step.pair) != 2:
+                raise ConfigError("%s.pair: expected two robot names, got %r" % (w, s.get("pair")))
+        elif behavior == "drive_assembly":
+            step.robots = _names(s.get("robots"), w + ".robots", robots)
+            step.velocities = [tuple(_numbers(s.get("velocity"), 2, w + ".velocity"))]
+            if step.distance <= 0 and step.timeout <= 0:
+                raise ConfigError("%s: drive_assembly needs a distance or a timeout > 0" % w)
         steps.append(step)
     return Scenario(str(data["name"]), str(data.get("description", "")), data["start"], steps)
 
@@ -132,6 +199,8 @@ def format_summary(scenario, results, wall_seconds, sim_seconds):
         if r.final_errors:
             lines.append("        final distance to goal: " + ", ".join(
                 "%s %.1f mm" % (n, 1e3 * e) for n, e in sorted(r.final_errors.items())))
+        if r.pairs:
+            lines.append("        pairs: " + r.pairs)
     skipped = len(scenario.steps) - len(results)
     if skipped:
         lines.append("(%d later step(s) not run)" % skipped)

@@ -84,6 +84,12 @@ class RobotGeometry:
     body_side: float = 0.05        # L: square body, origin at its centre
     anchor_length: float = 0.0125  # l: anchor head point C' = C + [-l, 0]
     wheel_base: float = 0.04       # track used to split (v, w) into wheel speeds
+    knob_radius: float = 0.0045    # side knob radius (facts.md); the knob is on the left (+y) side
+    knob_tolerance: float = 0.002  # half-size of the square around a hole in which a coupled knob's
+                                   # centre stays (the knob-hole coupling is rigid)
+    opening_width: float = 0.012   # front opening width; the anchor enters only through it
+    anchor_yaw_free: float = 0.5   # rad: yaw freedom of the anchor in its holder (+/-)
+    knob_yaw_tolerance: float = 0.1  # rad: heading difference a knob still enters its hole with
 
     @classmethod
     def from_dict(cls, data, where="geometry"):
@@ -103,6 +109,35 @@ class RobotGeometry:
         """Body square in the body frame, counter-clockwise."""
         h = self.body_side / 2.0
         return np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+
+    # Connection points (x, y, heading) in the body frame. A connection
+    # point's heading points out of the body, so two points that meet face
+    # each other (headings differ by pi) and the two robots have equal
+    # headings when coupled.
+    def anchor_point(self):
+        """C_a: where the anchor leaves the back face (-x)."""
+        return np.array([-self.body_side / 2.0, 0.0, math.pi])
+
+    def opening_point(self):
+        """C_o: centre of the front (+x) opening that receives another robot's anchor."""
+        return np.array([self.body_side / 2.0, 0.0, 0.0])
+
+    def anchor_head(self):
+        """H_a = C_a + (-l, 0): the anchor head point (paper: C')."""
+        return np.array([-self.body_side / 2.0 - self.anchor_length, 0.0])
+
+    def knob_point(self):
+        """Centre of the side knob, on the left (+y) face."""
+        return np.array([0.0, self.body_side / 2.0, math.pi / 2.0])
+
+    def hole_point(self):
+        """Centre of the side hole, on the right (-y) face; a neighbour's knob goes in here."""
+        return np.array([0.0, -self.body_side / 2.0, -math.pi / 2.0])
+
+    def knob_region(self):
+        """Square (counter-clockwise) around the hole in which a coupled knob's centre stays."""
+        c, t = self.hole_point(), self.knob_tolerance
+        return np.array([[c[0] - t, c[1] - t], [c[0] + t, c[1] - t], [c[0] + t, c[1] + t], [c[0] - t, c[1] + t]])
 
 
 def yaw_from_quaternion(qx, qy, qz, qw):

@@ -14,6 +14,8 @@ CONNECTION_PAIRS_TOPIC = STACK_NS + "/connection_pairs"
 SOLVER_STATS_TOPIC = STACK_NS + "/mpc/solver_stats"
 BEHAVIOR_STATUS_TOPIC = STACK_NS + "/mpc/behavior_status"
 SET_BEHAVIOR_SERVICE = STACK_NS + "/mpc/set_behavior"
+PREDICTED_TRAJECTORIES_TOPIC = STACK_NS + "/mpc/predicted_trajectories"
+MPC_MARKERS_TOPIC = STACK_NS + "/mpc/markers"
 ROBOTS_PARAM = STACK_NS + "/robots"
 SCENARIO_PARAM = STACK_NS + "/scenario"
 

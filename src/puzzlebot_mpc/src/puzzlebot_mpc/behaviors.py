@@ -1,20 +1,47 @@
-"""Behaviour requests: validation, per-robot objectives, progress status.
+"""Behaviour requests: validation, per-step objectives, progress status.
 
 One behaviour runs at a time; it names the robots it drives and every other
 robot is brought to rest. Requests are validated completely before they
-replace the running behaviour, so a bad request changes nothing.
+replace the running behaviour, so a bad request changes nothing (robots at
+rest stay at rest). Coupled pairs are kept by the MPC's polygon constraints
+whatever the behaviour.
+
+Behaviours:
+
+- ``go_to_goal``, ``follow_velocity``, ``stop``;
+- ``couple``: the robots form a target configuration (Algorithm 3: goal
+  pairs from the target and the start poses, conflict-free active pairs,
+  Algorithm 2 status updates). Succeeds when every goal pair is coupled;
+- ``decouple``: the named coupled pair separates: its anchor robot wiggles,
+  ``v = wiggle_v_bias, w = wiggle_w_amplitude sin(2 pi t / wiggle_period)``
+  (paper, eq. "wiggle"), its partner holds. Succeeds when the anchor head is
+  ``decouple_clearance`` outside the partner's footprint (+ eps);
+- ``drive_assembly``: the assembly of the named robots drives as one body
+  with twist (v, w) given in the first robot's frame: the first robot
+  tracks (v, w), every other member the rigid-body speed at its own position
+  along its heading, turning as its couplings allow (a chain of unicycles
+  turns like a train, within the anchors' yaw freedom). Succeeds after ``distance``
+  metres (or after ``timeout`` seconds when no distance is given); fails if
+  a coupled pair of the assembly is lost on the way.
 """
 
 import math
 from dataclasses import dataclass, field
 from typing import List, Sequence, Tuple
 
-from puzzlebot_mpc.controller import Objectives
+import numpy as np
+
+from puzzlebot_mpc import pairs as pr
+from puzzlebot_mpc.controller import Objectives, PairObjective
+from puzzlebot_mpc.targets import TargetError, assign, resolve_target
 
 GO_TO_GOAL = "go_to_goal"
 FOLLOW_VELOCITY = "follow_velocity"
 STOP = "stop"
-BEHAVIORS = (GO_TO_GOAL, FOLLOW_VELOCITY, STOP)
+COUPLE = "couple"
+DECOUPLE = "decouple"
+DRIVE_ASSEMBLY = "drive_assembly"
+BEHAVIORS = (GO_TO_GOAL, FOLLOW_VELOCITY, STOP, COUPLE, DECOUPLE, DRIVE_ASSEMBLY)
 
 # Behaviour states; same values as puzzlebot_msgs/BehaviorStatus.
 IDLE, RUNNING, SUCCEEDED, FAILED = 0, 1, 2, 3
@@ -30,9 +57,13 @@ class BehaviorRequest:
     behavior: str
     robots: Sequence[str] = ()                     # empty: all robots
     goals: Sequence[Tuple[float, float]] = ()      # go_to_goal, world frame [m]
-    velocities: Sequence[Tuple[float, float]] = ()  # follow_velocity, (v [m/s], w [rad/s])
+    velocities: Sequence[Tuple[float, float]] = ()  # follow_velocity: per robot; drive_assembly: one twist
     tolerance: float = 0.0                         # [m], 0 = default
     timeout: float = 0.0                           # [s], 0 = none; follow_velocity: duration
+    target: str = ""                               # couple: target name
+    slots: Sequence[Tuple[float, float, float]] = ()  # couple: explicit slots (assembly frame)
+    pair: Sequence[str] = ()                       # decouple: the two robots
+    distance: float = 0.0                          # drive_assembly: metres to drive (0: for timeout s)
 
 
 @dataclass
@@ -46,27 +77,46 @@ class BehaviorStatus:
 
 
 def _finite(values):
-    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
 
 
 class BehaviorManager:
-    """Holds the running behaviour and turns it into MPC objectives."""
+    """Holds the running behaviour and turns it into MPC objectives each step.
 
-    def __init__(self, robot_names, settings):
+    ``pairbook`` (pairs.PairBook) holds the coupled pairs; ``targets`` maps
+    names to targets.Target (from config/targets.yaml).
+    """
+
+    def __init__(self, robot_names, settings, geometry=None, pairbook=None, targets=None):
+        from puzzlebot_common.geometry import RobotGeometry
+
         self.names = list(robot_names)
         self.index = {name: i for i, name in enumerate(self.names)}
         self.settings = settings
+        self.geometry = geometry or RobotGeometry()
+        self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin)
+        self.targets = dict(targets or {})
         self._request_id = 0
         self._req = BehaviorRequest(STOP)
         self._robots = []
         self._start = None
         self._state = IDLE
         self._message = "no behaviour requested yet"
-        self._objectives = Objectives.stop_all(len(self.names))
+        self._static = Objectives.stop_all(len(self.names))
+        self._decoupling = None          # pair being decoupled
+        self._assembly = []              # drive_assembly / decouple followers
+        self._start_pose = None
+        self._assignment = None
+        self._last_progress = ""
 
     # ------------------------------------------------------------- requests
-    def validate(self, req):
+    def validate(self, req, poses=None):
         """Return the list of robots a request applies to, or raise BehaviorError."""
+        return self._check(req, poses)[0]
+
+    def _check(self, req, poses):
+        """(robots, couple assignment or decouple pair or None), or raise BehaviorError."""
+        extra = None
         if req.behavior not in BEHAVIORS:
             raise BehaviorError("unknown behaviour %r; known: %s" % (req.behavior, ", ".join(BEHAVIORS)))
         robots = list(req.robots) or list(self.names)
@@ -76,9 +126,10 @@ class BehaviorManager:
                                 % (", ".join(map(repr, unknown)), ", ".join(self.names)))
         if len(set(robots)) != len(robots):
             raise BehaviorError("a robot is named twice in %s" % robots)
-        if not _finite([req.tolerance, req.timeout]) or req.tolerance < 0 or req.timeout < 0:
-            raise BehaviorError("tolerance and timeout must be finite and >= 0 (got %r, %r)"
-                                % (req.tolerance, req.timeout))
+        if not _finite([req.tolerance, req.timeout, req.distance]) or min(req.tolerance, req.timeout,
+                                                                           req.distance) < 0:
+            raise BehaviorError("tolerance, timeout and distance must be finite and >= 0 (got %r, %r, %r)"
+                                % (req.tolerance, req.timeout, req.distance))
         if req.behavior == GO_TO_GOAL:
             if len(req.goals) != len(robots):
                 raise BehaviorError("go_to_goal needs one goal per robot: %d robot(s), %d goal(s)"
@@ -90,64 +141,375 @@ class BehaviorManager:
             if len(req.velocities) != len(robots):
                 raise BehaviorError("follow_velocity needs one velocity per robot: %d robot(s), %d velocity(ies)"
                                     % (len(robots), len(req.velocities)))
-            s = self.settings
             for name, vel in zip(robots, req.velocities):
-                if len(vel) != 2 or not _finite(vel):
-                    raise BehaviorError("velocity for %s is not a finite (v, w): %r" % (name, tuple(vel)))
-                if abs(vel[0]) > s.v_max + 1e-12 or abs(vel[1]) > s.w_max + 1e-12:
-                    raise BehaviorError("velocity for %s (%.3f m/s, %.3f rad/s) exceeds the limits "
-                                        "v_max %.3f m/s, w_max %.3f rad/s"
-                                        % (name, vel[0], vel[1], s.v_max, s.w_max))
-        return robots
+                self._check_velocity(name, vel)
+        if req.behavior == COUPLE:
+            extra = self._validate_couple(req, robots, poses)[1]
+        if req.behavior == DECOUPLE:
+            extra = self._validate_decouple(req, poses)
+        if req.behavior == DRIVE_ASSEMBLY:
+            if len(req.velocities) != 1:
+                raise BehaviorError("drive_assembly needs exactly one velocity (the assembly's twist in the "
+                                    "first robot's frame), got %d" % len(req.velocities))
+            self._check_velocity(robots[0], req.velocities[0])
+            if req.distance <= 0 and req.timeout <= 0:
+                raise BehaviorError("drive_assembly needs a distance or a timeout (duration) > 0")
+            if req.distance > 0 and abs(req.velocities[0][0]) < 1e-6:
+                raise BehaviorError("drive_assembly: a distance needs a non-zero linear velocity")
+            self._need_poses(robots[:1], poses, "drive_assembly")
+        return robots, extra
 
-    def request(self, req, now):
-        """Validate and start a behaviour at time ``now`` [s]; return its id."""
-        robots = self.validate(req)
+    def _check_velocity(self, name, vel):
+        s = self.settings
+        if len(vel) != 2 or not _finite(vel):
+            raise BehaviorError("velocity for %s is not a finite (v, w): %r" % (name, tuple(vel)))
+        if abs(vel[0]) > s.v_max + 1e-12 or abs(vel[1]) > s.w_max + 1e-12:
+            raise BehaviorError("velocity for %s (%.3f m/s, %.3f rad/s) exceeds the limits "
+                                "v_max %.3f m/s, w_max %.3f rad/s" % (name, vel[0], vel[1], s.v_max, s.w_max))
+
+    def _need_poses(self, robots, poses, what):
+        if poses is None:
+            return
+        missing = [r for r in robots if poses.get(r) is None or not _finite(poses[r])]
+        if missing:
+            raise BehaviorError("%s: no fresh, finite pose for %s; the robots stay as they are"
+                                % (what, ", ".join(missing)))
+
+    def _validate_couple(self, req, robots, poses):
+        if req.slots and not all(len(sl) == 3 and _finite(sl) for sl in req.slots):
+            raise BehaviorError("couple: every slot must be a finite (x, y, heading)")
+        try:
+            target = resolve_target(req.target, [tuple(sl) for sl in req.slots], len(robots), self.targets,
+                                    self.geometry)
+        except TargetError as e:
+            raise BehaviorError("couple: %s" % e)
+        if len(target.slots) > len(robots):
+            raise BehaviorError("couple: target %r has %d slots but only %d robot(s) were given"
+                                % (target.name, len(target.slots), len(robots)))
+        if len(target.slots) < len(robots):
+            raise BehaviorError("couple: target %r has %d slots for %d robots; name the robots to use"
+                                % (target.name, len(target.slots), len(robots)))
+        self._need_poses(robots, poses, "couple")
+        if poses is None:
+            return target, None
+        for p in self.pairs.coupled.values():
+            inside = [r in robots for r in p.robots]
+            if any(inside) and not all(inside):
+                raise BehaviorError("couple: %s is coupled to %s, which is not in the request; decouple it first "
+                                    "or include it" % tuple(p.robots if inside[0] else p.robots[::-1]))
+        try:
+            assignment = assign(target, robots, np.array([poses[r] for r in robots], float), self.geometry)
+        except TargetError as e:
+            raise BehaviorError("couple: %s" % e)
+        goal_keys = {p.key for p in assignment.pairs}
+        for p in self.pairs.coupled.values():
+            if p.robot_i in robots and p.key not in goal_keys:
+                raise BehaviorError("couple: %s and %s are coupled but the target assignment does not join "
+                                    "them that way; decouple them first" % p.robots)
+        return target, assignment
+
+    def _validate_decouple(self, req, poses):
+        if len(req.pair) != 2:
+            raise BehaviorError("decouple needs the pair's two robots, got %r" % (list(req.pair),))
+        unknown = [r for r in req.pair if r not in self.index]
+        if unknown:
+            raise BehaviorError("decouple: unknown robot(s) %s" % ", ".join(map(repr, unknown)))
+        pair = self.pairs.find(*req.pair)
+        if pair is None or pair.key not in self.pairs.coupled:
+            raise BehaviorError("decouple: %s and %s are not coupled; coupled pairs: %s"
+                                % (req.pair[0], req.pair[1],
+                                   ", ".join("%s-%s" % p.robots for p in self.pairs.coupled.values()) or "none"))
+        self._need_poses(list(req.pair), poses, "decouple")
+        return pair
+
+    def request(self, req, now, poses=None):
+        """Validate and start a behaviour at time ``now`` [s]; return its id.
+
+        ``poses``: name -> (x, y, theta) or None; needed by couple, decouple
+        and drive_assembly (a missing pose refuses those requests).
+        """
+        if req.behavior in (COUPLE, DECOUPLE, DRIVE_ASSEMBLY) and poses is None:
+            raise BehaviorError("%s needs the robots' current poses" % req.behavior)
+        robots, extra = self._check(req, poses)
         n = len(self.names)
         obj = Objectives.stop_all(n)
-        for k, name in enumerate(robots):
-            i = self.index[name]
-            if req.behavior == GO_TO_GOAL:
+        obj.velocity_mask = obj.velocity_mask.astype(float)
+        assignment = extra if req.behavior == COUPLE else None
+        decoupling = extra if req.behavior == DECOUPLE else None
+        if req.behavior == GO_TO_GOAL:
+            for k, name in enumerate(robots):
+                i = self.index[name]
                 obj.goal[i] = req.goals[k]
                 obj.goal_mask[i] = True
                 obj.velocity_mask[i] = False
-            elif req.behavior == FOLLOW_VELOCITY:
-                obj.velocity[i] = req.velocities[k]
+        elif req.behavior == FOLLOW_VELOCITY:
+            for k, name in enumerate(robots):
+                obj.velocity[self.index[name]] = req.velocities[k]
+        # accepted: replace the running behaviour
+        self._finish_decouple()
+        self.pairs.clear_goals()
         self._request_id += 1
         self._req, self._robots, self._start = req, robots, now
-        self._objectives = obj
+        self._static = obj
+        self._assignment = assignment
+        self._decoupling = None
+        self._assembly = []
+        self._start_pose = None
         self._state, self._message = RUNNING, "started"
+        if assignment is not None:
+            self.pairs.set_goals(assignment.pairs, assignment.priority)
+            self._message = "goal pairs: " + ", ".join("%s->%s" % p.key for p in assignment.pairs)
+        if decoupling is not None:
+            self.pairs.remove_coupled(decoupling.key)
+            decoupling.status = pr.HEAD_INSERTED
+            self._decoupling = decoupling
+            self._robots = list(decoupling.robots)
+            self._assembly = pr.assembly_of(decoupling.robot_i, self.names, self.pairs.coupled.values())
+            for m in self._assembly:       # robots coupled to the wiggling robot follow it
+                if m != decoupling.robot_i:
+                    self._static.velocity_mask[self.index[m]] = self.settings.follower_rest_scale
+        if req.behavior == DRIVE_ASSEMBLY:
+            group = set()
+            for r in robots:
+                group.update(pr.assembly_of(r, self.names, self.pairs.coupled.values()))
+            self._assembly = [n for n in self.names if n in group]
+            self._robots = self._assembly
+            lead = poses[robots[0]]
+            self._start_pose = (robots[0], np.array(lead, float))
         return self._request_id
 
-    def objectives(self):
-        return self._objectives
+    def _finish_decouple(self, poses=None):
+        """A decouple that ends (or is replaced) leaves its pair coupled if it still is geometrically."""
+        d = self._decoupling
+        if d is None:
+            return
+        self._decoupling = None
+        if poses is not None and self._decoupled(d, poses) is False:
+            self.pairs.add_coupled(d)
+
+    def _decoupled(self, pair, poses):
+        pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
+        if pi is None or pj is None:
+            return None
+        margin = pr.head_margin(pair, pi, pj, self.geometry.footprint())
+        return margin < -(self.settings.pair_epsilon + self.settings.decouple_clearance)
+
+    def coupling(self):
+        """True while a couple behaviour runs (active pairs are assigned every step)."""
+        return self._state == RUNNING and self._req.behavior == COUPLE
+
+    # ----------------------------------------------------------- objectives
+    def pair_slots(self):
+        """Pairs that get a slot in the MPC this step: coupled, goals, the one being decoupled."""
+        slots = self.pairs.all_pairs()
+        if self._decoupling is not None:
+            slots.append(self._decoupling)
+        return slots
+
+    def objectives(self, now=None, poses=None):
+        """Objectives for this step (poses: name -> (x, y, theta) or None)."""
+        s, n = self.settings, len(self.names)
+        base = self._static
+        mask = np.asarray(base.velocity_mask, float)
+        obj = Objectives(base.goal.copy(), base.goal_mask.copy(), base.velocity.copy(),
+                         np.repeat(mask[:, None], 2, axis=1) if mask.ndim == 1 else mask.copy())
+        if self._state == RUNNING and self._req.behavior == COUPLE:
+            self._couple_objectives(obj)
+        elif self._state == RUNNING and self._req.behavior == DECOUPLE and self._decoupling is not None:
+            obj.velocity = self._wiggle_profile(now)
+        elif self._state == RUNNING and self._req.behavior == DRIVE_ASSEMBLY and poses is not None:
+            obj.velocity = self._assembly_velocities(poses)
+            leads = set(self._req.robots[:1])
+            for m in self._assembly:          # followers: the rigid-body speed, turn as the couplings allow
+                if m not in leads:
+                    obj.velocity_mask[self.index[m]] = (1.0, 0.0)
+        active = {p.key for p in self.pairs.active}
+        for p in self.pair_slots():
+            coupled = p.key in self.pairs.coupled
+            pi, pj = pr.alignment_points(p, poses.get(p.robot_i) if poses else None,
+                                         poses.get(p.robot_j) if poses else None,
+                                         (s.approach_lookahead, s.approach_standoff_max, s.approach_gain_angle,
+                                          s.approach_gain_lateral), mover=self._mover(p))
+            obj.pairs.append(PairObjective(self.index[p.robot_i], self.index[p.robot_j], pi, pj,
+                                           active=p.key in active and not coupled, coupled=coupled,
+                                           head=p.head, polygon=pr.coupling_polygon(p, self.geometry),
+                                           yaw_limit=pr.yaw_limit(p, self.geometry)))
+        return obj
+
+    def _mover(self, pair):
+        """"i" or "j": the robot of an active pair that docks (the smaller assembly; the opening robot on a tie)."""
+        coupled = self.pairs.coupled.values()
+        size_i = len(pr.assembly_of(pair.robot_i, self.names, coupled))
+        size_j = len(pr.assembly_of(pair.robot_j, self.names, coupled))
+        return "i" if size_i < size_j else "j"
+
+    def _couple_objectives(self, obj):
+        """The single robot of an active pair docks (no rest cost); the assembly it joins holds still
+        (rest cost scaled by hold_scale), so the docking robot aligns with a target that does not move.
+
+        The seed pair (two single robots) aligns with both robots moving.
+        """
+        hold = math.sqrt(self.settings.hold_scale)
+        for p in self.pairs.active:
+            sizes = [len(pr.assembly_of(r, self.names, self.pairs.coupled.values())) for r in p.robots]
+            for r, size in zip(p.robots, sizes):
+                if size == 1:
+                    obj.velocity_mask[self.index[r]] = 0.0
+                else:
+                    for m in pr.assembly_of(r, self.names, self.pairs.coupled.values()):
+                        obj.velocity_mask[self.index[m]] = hold
+
+    def _wiggle_profile(self, now):
+        s, h, n = self.settings, self.settings.horizon, len(self.names)
+        vel = np.zeros((n, h, 2))
+        d = self._decoupling
+        i = self.index[d.robot_i]
+        t = (now if now is not None else self._start) - self._start
+        tk = t + s.dt * np.arange(1, h + 1)
+        vel[i, :, 0] = s.wiggle_v_bias
+        vel[i, :, 1] = s.wiggle_w_amplitude * np.sin(2 * math.pi * tk / s.wiggle_period)
+        return vel
+
+    def _assembly_velocities(self, poses):
+        s, n = self.settings, len(self.names)
+        vel = np.zeros((n, 2))
+        lead_name = self._req.robots[0] if self._req.robots else self._assembly[0]
+        lead = poses.get(lead_name)
+        if lead is None:
+            return vel
+        v, w = self._req.velocities[0]
+        c, sn = math.cos(lead[2]), math.sin(lead[2])
+        for m in self._assembly:
+            pm = poses.get(m)
+            if pm is None:
+                continue
+            rx, ry = pm[0] - lead[0], pm[1] - lead[1]
+            vx, vy = v * c - w * ry, v * sn + w * rx
+            vm = vx * math.cos(pm[2]) + vy * math.sin(pm[2])
+            vel[self.index[m]] = (float(np.clip(vm, -s.v_max, s.v_max)), w)
+        return vel
 
     # --------------------------------------------------------------- status
-    def update(self, now, poses):
-        """Advance the behaviour's state given ``poses`` (name -> (x, y, theta) or None)."""
+    def update(self, now, poses, newly=(), lost=()):
+        """Advance the behaviour's state given ``poses`` (name -> (x, y, theta) or None).
+
+        ``newly``/``lost``: pairs that were just coupled / lost this step
+        (from PairBook.update), for the couple and drive_assembly checks.
+        """
         req = self._req
         errors = []
         if req.behavior == GO_TO_GOAL:
             for name in self._robots:
                 pose = poses.get(name)
-                goal = self._objectives.goal[self.index[name]]
+                goal = self._static.goal[self.index[name]]
                 errors.append(float("nan") if pose is None else math.hypot(pose[0] - goal[0], pose[1] - goal[1]))
         if self._state == RUNNING:
             elapsed = now - self._start
             tol = req.tolerance or self.settings.goal_tolerance
             if req.behavior == STOP:
-                self._state, self._message = SUCCEEDED, "stopped"
+                self._succeed("stopped")
             elif req.behavior == GO_TO_GOAL and errors and all(e <= tol for e in errors):
-                self._state = SUCCEEDED
-                self._message = "all %d robot(s) within %.1f mm of their goals after %.2f s" % (
-                    len(errors), 1e3 * tol, elapsed)
-            elif req.timeout and elapsed >= req.timeout:
+                self._succeed("all %d robot(s) within %.1f mm of their goals after %.2f s"
+                              % (len(errors), 1e3 * tol, elapsed))
+            elif req.behavior == COUPLE:
+                self._requeue_lost(lost)
+                errors = self._couple_status(now, poses, newly, elapsed)
+            elif req.behavior == DECOUPLE:
+                errors = self._decouple_status(poses, elapsed)
+            elif req.behavior == DRIVE_ASSEMBLY:
+                errors = self._drive_status(poses, lost, elapsed)
+            if self._state == RUNNING and req.timeout and elapsed >= req.timeout:
                 if req.behavior == FOLLOW_VELOCITY:
-                    self._state, self._message = SUCCEEDED, "followed the velocity for %.2f s" % elapsed
+                    self._succeed("followed the velocity for %.2f s" % elapsed)
+                elif req.behavior == DRIVE_ASSEMBLY and req.distance <= 0:
+                    self._succeed("drove the assembly %s for %.2f s with every pair coupled"
+                                  % ("+".join(self._assembly), elapsed))
                 else:
-                    far = [n for n, e in zip(self._robots, errors) if not e <= tol]
-                    self._state = FAILED
-                    self._message = "timeout after %.2f s; not at goal: %s" % (elapsed, ", ".join(far))
-                self._objectives = Objectives.stop_all(len(self.names))
+                    self._fail_timeout(poses, errors, elapsed)
         return BehaviorStatus(self._request_id, req.behavior, self._state, self._message,
                               list(self._robots), errors)
+
+    def _succeed(self, message):
+        self._state, self._message = SUCCEEDED, message
+        self._rest()
+
+    def _rest(self):
+        self._static = Objectives.stop_all(len(self.names))
+        self.pairs.clear_goals()
+
+    def _fail_timeout(self, poses, errors, elapsed):
+        req = self._req
+        if req.behavior == GO_TO_GOAL:
+            tol = req.tolerance or self.settings.goal_tolerance
+            far = [n for n, e in zip(self._robots, errors) if not e <= tol]
+            msg = "timeout after %.2f s; not at goal: %s" % (elapsed, ", ".join(far))
+        elif req.behavior == COUPLE:
+            msg = "timeout after %.2f s; not coupled: %s" % (
+                elapsed, ", ".join(p.describe() for p in self.pairs.goals))
+        elif req.behavior == DECOUPLE:
+            msg = "timeout after %.2f s; %s-%s still coupled" % ((elapsed,) + tuple(self._robots))
+            self._finish_decouple(poses)
+        else:
+            msg = "timeout after %.2f s: %s" % (elapsed, self._last_progress)
+        self._state, self._message = FAILED, msg
+        self._rest()
+
+    def _requeue_lost(self, lost):
+        """A goal pair lost on the way (pulled apart) is a goal again."""
+        keys = {p.key for p in self._assignment.pairs} if self._assignment else set()
+        for p in lost:
+            if p.key in keys and p not in self.pairs.goals:
+                p.status = pr.DECOUPLED
+                self.pairs.goals.append(p)
+
+    def _couple_status(self, now, poses, newly, elapsed):
+        goals = self.pairs.goals
+        errors = []
+        for p in self._assignment.pairs if self._assignment else []:
+            pi, pj = poses.get(p.robot_i), poses.get(p.robot_j)
+            errors.append(float("nan") if pi is None or pj is None else pr.alignment_error(p, pi, pj)[0])
+        if not goals:
+            self._succeed("all %d pair(s) coupled after %.2f s: %s" % (
+                len(self._assignment.pairs), elapsed, ", ".join("%s->%s" % p.key for p in self._assignment.pairs)))
+        else:
+            self._message = "%d of %d pair(s) coupled; active: %s" % (
+                len(self._assignment.pairs) - len(goals), len(self._assignment.pairs),
+                ", ".join(p.describe() for p in self.pairs.active) or "none")
+        return errors
+
+    def _decouple_status(self, poses, elapsed):
+        d = self._decoupling
+        if d is None:
+            return []
+        pi, pj = poses.get(d.robot_i), poses.get(d.robot_j)
+        if pi is None or pj is None:
+            return [float("nan")]
+        margin = pr.head_margin(d, pi, pj, self.geometry.footprint())
+        if self._decoupled(d, poses):
+            d.status = pr.DECOUPLED
+            self._decoupling = None
+            self._succeed("%s-%s decoupled after %.2f s (anchor head %.1f mm outside %s)"
+                          % (d.robot_i, d.robot_j, elapsed, -1e3 * margin, d.robot_j))
+        else:
+            self._message = "wiggling %s out of %s (head %.1f mm inside)" % (d.robot_i, d.robot_j, 1e3 * margin)
+        return [-margin]
+
+    def _drive_status(self, poses, lost, elapsed):
+        name, start = self._start_pose
+        pose = poses.get(name)
+        member_lost = [p for p in lost if p.robot_i in self._assembly]
+        if member_lost:
+            self._state = FAILED
+            self._message = "pair(s) lost while driving: %s" % ", ".join("%s-%s" % p.robots for p in member_lost)
+            self._rest()
+            return []
+        if pose is None:
+            return [float("nan")]
+        moved = math.hypot(pose[0] - start[0], pose[1] - start[1])
+        self._last_progress = "the assembly moved %.3f m" % moved
+        if self._req.distance > 0 and moved >= self._req.distance:
+            self._succeed("the assembly %s drove %.3f m in %.2f s with every pair coupled"
+                          % ("+".join(self._assembly), moved, elapsed))
+        else:
+            self._message = "driving: %.3f m" % moved
+        return [moved]

@@ -5,6 +5,10 @@ The node feeds measured poses in with :meth:`ControlLoop.on_pose` and calls
 ``/<robot>/cmd_vel``. Poses are world-frame ``(x, y, yaw)`` with their
 measurement stamps (seconds).
 
+Each step also runs the pair bookkeeping of Algorithm 3: status updates of
+the active pairs (Algorithm 2) and the coupled-pair watchdog, then the
+conflict-free choice of active pairs, before the MPC solve.
+
 Safety rules, applied every step:
 - a non-finite pose, a pose for an unknown robot or one older than the last
   accepted sample is rejected (the caller logs the returned reason);
@@ -14,14 +18,16 @@ Safety rules, applied every step:
 """
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
+from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.behaviors import BehaviorManager
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
 from puzzlebot_mpc.model import NX
+from puzzlebot_mpc.pairs import PairBook
 
 
 @dataclass
@@ -69,55 +75,76 @@ class StepOutput:
     status: object                             # behaviors.BehaviorStatus
     stale: List[str]                           # robots stopped for lack of a fresh pose
     poses: Dict[str, Optional[Tuple[float, float, float]]]
+    pairs: list = None                         # every known ConnectionPair (coupled, goals, decoupling)
+    newly_coupled: list = None
+    lost: list = None
 
 
 class ControlLoop:
     """Poses in, behaviour objectives, MPC solve, commands out."""
 
-    def __init__(self, robot_names, settings):
+    def __init__(self, robot_names, settings, geometry=None, targets=None):
         self.names = list(robot_names)
         self.settings = settings
+        self.geometry = geometry or RobotGeometry()
         self.poses = PoseBook(self.names, settings.pose_timeout)
-        self.behaviors = BehaviorManager(self.names, settings)
+        self.pairs = PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin)
+        self.behaviors = BehaviorManager(self.names, settings, self.geometry, self.pairs, targets)
         self.mpc = MultiRobotMPC(settings, len(self.names)).setup()
         self._last_cmd = np.zeros((len(self.names), 2))
 
     def on_pose(self, name, stamp, x, y, yaw):
         return self.poses.update(name, stamp, x, y, yaw)
 
+    def fresh_poses(self, now):
+        return {name: self.poses.fresh(name, now) for name in self.names}
+
+    def request(self, req, now):
+        """Validate and start a behaviour (behaviors.BehaviorManager.request) with the current poses."""
+        return self.behaviors.request(req, now, self.fresh_poses(now))
+
+    def pair_keys(self):
+        """The current pair slots as robot index tuples (the MPC structure's key)."""
+        index = {n: i for i, n in enumerate(self.names)}
+        return [(index[p.robot_i], index[p.robot_j]) for p in self.behaviors.pair_slots()]
+
     def step(self, now):
         n = len(self.names)
-        poses = {name: self.poses.fresh(name, now) for name in self.names}
-        status = self.behaviors.update(now, poses)
+        poses = self.fresh_poses(now)
+        newly, lost = self.pairs.update(poses)
+        status = self.behaviors.update(now, poses, newly, lost)
         stale = [name for name in self.names if poses[name] is None]
         if len(stale) == n:
             self._last_cmd[:] = 0.0
             result = MPCResult(np.zeros((n, 2)), np.zeros((n, self.settings.horizon + 1, NX)),
                                False, "no fresh pose for any robot", 0.0, 0, float("nan"), fallback="stop")
-            return self._output(result, status, stale, poses)
-
-        obj = self.behaviors.objectives()
-        obj = replace(obj, goal_mask=obj.goal_mask.copy(), velocity=obj.velocity.copy(),
-                      velocity_mask=obj.velocity_mask.copy())
+            return self._output(result, status, stale, poses, newly, lost)
+        if self.behaviors.coupling():
+            self.pairs.assign_active(poses)
+        obj = self.behaviors.objectives(now, poses)
         x0 = np.zeros((n, NX))
         for i, name in enumerate(self.names):
             pose = poses[name]
             if pose is None:
-                obj.goal_mask[i], obj.velocity_mask[i] = False, True
+                obj.goal_mask[i], obj.velocity_mask[i] = False, 1.0
                 obj.velocity[i] = 0.0
                 self._last_cmd[i] = 0.0
                 latest = self.poses.latest(name)
                 pose = (latest.x, latest.y, latest.yaw) if latest else (0.0, 0.0, 0.0)
             x0[i, :3] = pose
             x0[i, 3:] = self._last_cmd[i]
+        if stale:
+            for p in obj.pairs:     # no alignment towards a robot whose pose is unknown
+                if self.names[p.i] in stale or self.names[p.j] in stale:
+                    p.active = False
         result = self.mpc.make_step(x0, obj)
         for i, name in enumerate(self.names):
             if poses[name] is None:
                 result.commands[i] = 0.0
         self._last_cmd = result.commands.copy()
-        return self._output(result, status, stale, poses)
+        return self._output(result, status, stale, poses, newly, lost)
 
-    def _output(self, result, status, stale, poses):
+    def _output(self, result, status, stale, poses, newly, lost):
         commands = {name: (float(result.commands[i, 0]), float(result.commands[i, 1]))
                     for i, name in enumerate(self.names)}
-        return StepOutput(commands, result, status, stale, poses)
+        return StepOutput(commands, result, status, stale, poses, self.behaviors.pair_slots(), newly, lost)

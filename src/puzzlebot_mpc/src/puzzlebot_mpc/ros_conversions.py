@@ -4,10 +4,15 @@ Only message classes are used (no rospy calls), so these run and are tested
 without a roscore.
 """
 
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import Point, Pose2D, Twist
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
 
-from puzzlebot_msgs.msg import BehaviorStatus, SolverStats
+from puzzlebot_common import names
+from puzzlebot_msgs.msg import (BehaviorStatus, ConnectionPair, ConnectionPairArray, PredictedTrajectories,
+                                RobotTrajectory, SolverStats)
 from puzzlebot_mpc.behaviors import BehaviorRequest
+from puzzlebot_mpc.pairs import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, world_point
 
 
 def request_from_srv(req):
@@ -15,7 +20,74 @@ def request_from_srv(req):
     return BehaviorRequest(behavior=req.behavior, robots=list(req.robots),
                            goals=[(g.x, g.y) for g in req.goals],
                            velocities=[(t.linear.x, t.angular.z) for t in req.velocities],
-                           tolerance=req.tolerance, timeout=req.timeout)
+                           tolerance=req.tolerance, timeout=req.timeout, target=req.target,
+                           slots=[(sl.x, sl.y, sl.theta) for sl in req.slots], pair=list(req.pair),
+                           distance=req.distance)
+
+
+def pose2d(p):
+    return Pose2D(x=float(p[0]), y=float(p[1]), theta=float(p[2]))
+
+
+def pair_msg(pair):
+    """pairs.ConnectionPair -> puzzlebot_msgs/ConnectionPair."""
+    return ConnectionPair(robot_i=pair.robot_i, robot_j=pair.robot_j, point_i=pose2d(pair.point_i),
+                          point_j=pose2d(pair.point_j), type=pair.type, anchor_robot=pair.anchor_robot,
+                          status=pair.status)
+
+
+def pairs_msg(pairs, stamp):
+    msg = ConnectionPairArray(pairs=[pair_msg(p) for p in pairs])
+    msg.header.stamp = stamp
+    msg.header.frame_id = names.WORLD_FRAME
+    return msg
+
+
+def predicted_msg(result, robot_names, stamp, dt):
+    """The MPC's predicted states (N, H+1, 5) as PredictedTrajectories (empty after a failure)."""
+    msg = PredictedTrajectories(dt=dt)
+    msg.header.stamp = stamp
+    msg.header.frame_id = names.WORLD_FRAME
+    if result.success:
+        for i, name in enumerate(robot_names):
+            X = result.predicted[i]
+            msg.robots.append(RobotTrajectory(robot=name, poses=[pose2d(x[:3]) for x in X],
+                                              v=[float(x) for x in X[:, 3]], w=[float(x) for x in X[:, 4]]))
+    return msg
+
+
+_STATUS_COLOURS = {DECOUPLED: (0.9, 0.2, 0.2), HEAD_ALIGNED: (0.95, 0.75, 0.1), HEAD_INSERTED: (0.1, 0.8, 0.2)}
+
+
+def markers_msg(result, robot_names, pairs, poses, stamp, z=0.03):
+    """rviz markers: one line strip per predicted trajectory, one line per connection pair
+    (between its connection points, coloured by status: red decoupled, yellow head aligned,
+    green coupled)."""
+    out = MarkerArray()
+    clear = Marker(action=Marker.DELETEALL)
+    clear.header.frame_id = names.WORLD_FRAME
+    out.markers.append(clear)
+    for i, name in enumerate(robot_names if result.success else []):
+        m = Marker(type=Marker.LINE_STRIP, action=Marker.ADD, ns="predicted", id=i)
+        m.header.stamp, m.header.frame_id = stamp, names.WORLD_FRAME
+        m.pose.orientation.w = 1.0
+        m.scale.x = 0.003
+        m.color = ColorRGBA(0.2, 0.5, 1.0, 0.9)
+        m.points = [Point(float(x[0]), float(x[1]), z) for x in result.predicted[i]]
+        out.markers.append(m)
+    for k, pair in enumerate(pairs):
+        pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
+        if pi is None or pj is None:
+            continue
+        a, b = world_point(pi, pair.point_i), world_point(pj, pair.point_j)
+        m = Marker(type=Marker.LINE_LIST, action=Marker.ADD, ns="pairs", id=k)
+        m.header.stamp, m.header.frame_id = stamp, names.WORLD_FRAME
+        m.pose.orientation.w = 1.0
+        m.scale.x = 0.004
+        m.color = ColorRGBA(*_STATUS_COLOURS[pair.status], 1.0)
+        m.points = [Point(float(a[0]), float(a[1]), z), Point(float(b[0]), float(b[1]), z)]
+        out.markers.append(m)
+    return out
 
 
 def twist(v, w):

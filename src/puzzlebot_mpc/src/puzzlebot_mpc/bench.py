@@ -1,0 +1,231 @@
+"""MPC step-time benchmark on a real coupling run (no ROS needed).
+
+One configuration: a chain of N robots, every neighbouring pair coupled
+(N-1 anchor pairs, polygon constraints on for k = 1..Hc), drives as one
+assembly along an S-curve (drive_assembly, v = 0.03 m/s, the turn rate
+switching sign halfway) on the kinematic plant (model.unicycle_arc). Every
+control step goes through ControlLoop.step: pair bookkeeping, behaviour
+objectives, the MPC solve. The step time is the wall time of that call;
+the first step (it builds the problem for the pair structure and starts
+cold) is reported separately as ``first_step_ms`` and not in the
+statistics.
+
+    python -m puzzlebot_mpc.bench --robots 8 --horizon 10 --json
+    python -m puzzlebot_mpc.bench --grid --out build/bench/mpc_bench.json
+    python -m puzzlebot_mpc.bench --robots 4 --couple-trials 24   # coupling success rate
+"""
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_mpc.behaviors import DRIVE_ASSEMBLY, BehaviorRequest
+from puzzlebot_mpc.config_files import load_settings
+from puzzlebot_mpc.control_loop import ControlLoop
+from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_mpc.pairs import ANCHOR, coupling_polygon, head_margin, make_pair
+
+GRID_ROBOTS = (2, 4, 6, 8, 16, 32)
+GRID_HORIZONS = (3, 5, 10)
+DRIVE_V = 0.03        # m/s, assembly speed
+DRIVE_W = 0.15        # rad/s, turn rate (sign switches halfway: an S-curve)
+PLANT_SUBSTEPS = 10   # plant integration steps per control period
+
+
+def chain(n, geometry):
+    """Names and poses of a straight coupled chain along +x (first robot in front)."""
+    names = ["b%d" % (k + 1) for k in range(n)]
+    poses = {name: (-k * geometry.body_side, 0.0, 0.0) for k, name in enumerate(names)}
+    return names, poses
+
+
+def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=None):
+    """Benchmark one configuration; returns the result dict (JSON line fields and extras)."""
+    base = settings or load_settings()
+    s = replace(base, horizon=horizon, constraint_horizon=min(constraint_horizon, horizon))
+    if solver:
+        s = replace(s, solver=solver)
+    s.check()
+    geometry = RobotGeometry()
+    names, poses = chain(robots, geometry)
+    t_build = time.perf_counter()
+    loop = ControlLoop(names, s, geometry)
+    setup_s = time.perf_counter() - t_build
+    for a, o in zip(names[:-1], names[1:]):
+        loop.pairs.add_coupled(make_pair(a, o, ANCHOR, geometry))
+    t = 0.0
+    for name, p in poses.items():
+        loop.on_pose(name, t, *p)
+    loop.request(BehaviorRequest(DRIVE_ASSEMBLY, [names[0]], velocities=[(DRIVE_V, DRIVE_W)],
+                                 timeout=(steps + 5) * s.dt), t)
+    times, failures, first_ms, lost = [], 0, None, 0
+    min_margin = math.inf
+    qp_iterations = []
+    for k in range(steps + 1):
+        if k == steps // 2 + 1:        # second half of the S-curve
+            loop.request(BehaviorRequest(DRIVE_ASSEMBLY, [names[0]], velocities=[(DRIVE_V, -DRIVE_W)],
+                                         timeout=(steps + 5) * s.dt), t)
+        t0 = time.perf_counter()
+        out = loop.step(t)
+        ms = 1e3 * (time.perf_counter() - t0)
+        if k == 0:
+            first_ms = ms
+        else:
+            times.append(ms)
+            qp_iterations.append(out.result.iterations)
+        failures += 0 if out.result.success else 1
+        lost += len(out.lost or [])
+        sub = s.dt / PLANT_SUBSTEPS
+        for name in names:
+            v, w = out.commands[name]
+            p = poses[name]
+            for _ in range(PLANT_SUBSTEPS):
+                p = unicycle_arc(p, v, w, sub)
+            poses[name] = tuple(p)
+        t += s.dt
+        for name, p in poses.items():
+            loop.on_pose(name, t, *p)
+        for pair in loop.pairs.coupled.values():
+            min_margin = min(min_margin, head_margin(pair, poses[pair.robot_i], poses[pair.robot_j],
+                                                     coupling_polygon(pair, geometry)))
+    arr = np.array(times)
+    lead_moved = math.hypot(poses[names[0]][0], poses[names[0]][1])
+    return {"robots": robots, "horizon": horizon, "constraint_horizon": s.constraint_horizon,
+            "steps": steps, "median_ms": round(float(np.median(arr)), 3),
+            "p95_ms": round(float(np.percentile(arr, 95)), 3), "max_ms": round(float(arr.max()), 3),
+            "failures": failures, "solver": s.solver, "first_step_ms": round(first_ms, 1),
+            "setup_s": round(setup_s, 3), "build_s": round(loop.mpc.build_seconds, 3),
+            "coupled_pairs": len(loop.pairs.coupled), "pairs_lost": lost,
+            "min_pip_margin_mm": round(1e3 * min_margin, 2), "lead_moved_m": round(lead_moved, 3),
+            "qp_iterations_median": float(np.median(qp_iterations))}
+
+
+def couple_trials(robots, trials, seed=0, timeout=120.0, settings=None):
+    """Coupling success on the kinematic plant from random scattered starts.
+
+    Two robots: the paper's experiment -- 65 mm apart along x, y offsets
+    0..30 mm, headings within +-0.3 rad. More robots: spaced 90 mm along x
+    (+-20 mm), +-40 mm sideways, headings within +-0.6 rad; target "line".
+    Returns a dict: trials, coupled, coupling times [s], failed solves.
+    """
+    s = settings or load_settings()
+    geometry = RobotGeometry()
+    rng = np.random.default_rng(seed)
+    times, failures = [], 0
+    for trial in range(trials):
+        names = ["c%d" % (k + 1) for k in range(robots)]
+        if robots == 2:
+            offset = 0.030 * trial / max(1, trials - 1)
+            poses = {names[0]: (0.0, 0.0, rng.uniform(-0.3, 0.3)),
+                     names[1]: (-0.065, offset, rng.uniform(-0.3, 0.3))}
+        else:
+            poses = {n: (-0.09 * k + rng.uniform(-0.02, 0.02), rng.uniform(-0.04, 0.04), rng.uniform(-0.6, 0.6))
+                     for k, n in enumerate(names)}
+        loop = ControlLoop(names, s, geometry)
+        t = 0.0
+        for name, p in poses.items():
+            loop.on_pose(name, t, *p)
+        rid = loop.request(BehaviorRequest("couple", names, target="line", timeout=timeout), t)
+        while t < timeout + 1.0:
+            out = loop.step(t)
+            failures += 0 if out.result.success else 1
+            for name in names:
+                v, w = out.commands[name]
+                p = poses[name]
+                for _ in range(PLANT_SUBSTEPS):
+                    p = unicycle_arc(p, v, w, s.dt / PLANT_SUBSTEPS)
+                poses[name] = tuple(p)
+            t += s.dt
+            for name, p in poses.items():
+                loop.on_pose(name, t, *p)
+            if out.status.request_id == rid and out.status.state != 1:
+                if out.status.state == 2:
+                    times.append(t)
+                break
+    return {"robots": robots, "trials": trials, "coupled": len(times),
+            "mean_s": round(float(np.mean(times)), 2) if times else None,
+            "max_s": round(float(np.max(times)), 2) if times else None, "failed_solves": failures}
+
+
+def machine():
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = (float("nan"),) * 3
+    return {"cpu_count": os.cpu_count(), "machine": platform.machine(), "python": platform.python_version(),
+            "load_avg_1_5_15": [round(x, 2) for x in load]}
+
+
+def table(results):
+    """Markdown table: rows N, columns Hm (median / p95 ms)."""
+    horizons = sorted({r["horizon"] for r in results})
+    lines = ["| N | " + " | ".join("Hm=%d median / p95 [ms]" % h for h in horizons) + " | failures |",
+             "|---|" + "---|" * len(horizons) + "---|"]
+    for n in sorted({r["robots"] for r in results}):
+        row = [r for r in results if r["robots"] == n]
+        cells = []
+        for h in horizons:
+            c = [r for r in row if r["horizon"] == h]
+            cells.append("%.1f / %.1f" % (c[0]["median_ms"], c[0]["p95_ms"]) if c else "-")
+        lines.append("| %d | %s | %d |" % (n, " | ".join(cells), sum(r["failures"] for r in row)))
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="MPC step time on a coupled chain driving as one assembly.")
+    ap.add_argument("--robots", type=int, default=8, help="robots in the chain (N-1 coupled pairs)")
+    ap.add_argument("--horizon", type=int, default=10, help="prediction horizon Hm")
+    ap.add_argument("--constraint-horizon", type=int, default=3, help="constraint horizon Hc <= Hm")
+    ap.add_argument("--steps", type=int, default=50, help="control steps measured (>= 50 for the table)")
+    ap.add_argument("--solver", choices=("clarabel", "ipopt"), default=None, help="override mpc.yaml's solver")
+    ap.add_argument("--json", action="store_true", help="print one JSON line")
+    ap.add_argument("--grid", action="store_true",
+                    help="run N in %s x Hm in %s and print the table" % (GRID_ROBOTS, GRID_HORIZONS))
+    ap.add_argument("--out", action="append", default=[], help="with --grid: write the results as JSON here")
+    ap.add_argument("--couple-trials", type=int, default=0, metavar="T",
+                    help="instead: T coupling trials of --robots robots from random starts (kinematic plant)")
+    args = ap.parse_args(argv)
+    if args.couple_trials > 0:
+        r = couple_trials(args.robots, args.couple_trials)
+        print(json.dumps(r))
+        return 0
+    if args.robots < 2 or args.horizon < 1 or args.steps < 1 or args.constraint_horizon < 1:
+        ap.error("need --robots >= 2, --horizon >= 1, --constraint-horizon >= 1, --steps >= 1")
+    if not args.grid:
+        r = run(args.robots, args.horizon, args.constraint_horizon, args.steps, solver=args.solver)
+        if args.json:
+            print(json.dumps(r))
+        else:
+            print("N=%d Hm=%d Hc=%d: median %.2f ms, p95 %.2f ms, failures %d (%s)"
+                  % (r["robots"], r["horizon"], r["constraint_horizon"], r["median_ms"], r["p95_ms"],
+                     r["failures"], r["solver"]))
+        return 0 if r["failures"] == 0 else 1
+    results = []
+    for n in GRID_ROBOTS:
+        for h in GRID_HORIZONS:
+            r = run(n, h, args.constraint_horizon, args.steps, solver=args.solver)
+            print(json.dumps(r), flush=True)
+            results.append(r)
+    doc = {"benchmark": "puzzlebot_mpc.bench", "machine": machine(), "steps": args.steps,
+           "time": time.strftime("%Y-%m-%d %H:%M:%S"), "results": results}
+    for path in args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        with open(path, "w") as f:
+            json.dump(doc, f, indent=1)
+    print()
+    print("MPC step time (ControlLoop.step wall time), chain of N coupled robots driving, Hc = %d, %d steps; "
+          "load average %s" % (args.constraint_horizon, args.steps, doc["machine"]["load_avg_1_5_15"]))
+    print(table(results))
+    return 0 if all(r["failures"] == 0 for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,212 @@
+"""Algorithms 1-3 without ROS: augmentation, the status machine, activation, targets, assignment."""
+
+import math
+from itertools import permutations
+
+import numpy as np
+import pytest
+
+from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_mpc import pairs as pr
+from puzzlebot_mpc.config_files import load_target_file
+from puzzlebot_mpc.targets import (TargetError, assign, assignment_cost, brute_force_assignment, distance_mst,
+                                   generate, make_target, place, resolve_target)
+
+GEO = RobotGeometry()
+L, l, EPS = GEO.body_side, GEO.anchor_length, 0.0015
+
+
+# ---------------------------------------------------------------- Algorithm 1
+def test_augment_sets_type_anchor_side_and_head():
+    goal = [("a", GEO.opening_point(), "b", GEO.anchor_point()),    # given the other way round
+            ("c", GEO.knob_point(), "d", GEO.hole_point())]
+    anchor, knob = pr.augment_pairs(goal, GEO)
+    assert anchor.type == pr.ANCHOR and anchor.robots == ("b", "a") and anchor.anchor_robot == "b"
+    assert anchor.status == pr.DECOUPLED
+    assert anchor.head == pytest.approx([-L / 2 - l, 0.0])
+    assert knob.type == pr.KNOB and knob.robots == ("c", "d") and knob.anchor_robot == ""
+    with pytest.raises(ValueError, match="do not form"):
+        pr.augment_pairs([("a", GEO.anchor_point(), "b", GEO.knob_point())], GEO)
+
+
+# ---------------------------------------------------------------- Algorithm 2
+def opening_robot_behind(gap, lateral=0.0, dtheta=0.0):
+    """Anchor robot a at the origin facing +x, opening robot o behind it: its front is ``gap``
+    metres behind a's back, ``lateral`` to the side, turned by ``dtheta``."""
+    pose_a = (0.0, 0.0, 0.0)
+    pose_o = (-L - gap, lateral, dtheta)
+    return pose_a, pose_o
+
+
+def step_status(pair, pose_a, pose_o):
+    pair.status = pr.update_status(pair, pose_a, pose_o, GEO, EPS)
+    return pair.status
+
+
+def test_status_machine_follows_algorithm_2_on_a_scripted_approach():
+    pair = pr.make_pair("a", "o", pr.ANCHOR, GEO)
+    script = [  # (gap between a's back and o's front [m], expected status)
+        (0.05, pr.DECOUPLED),
+        (l + EPS + 0.001, pr.DECOUPLED),      # head just outside o's footprint + eps
+        (l + EPS - 0.001, pr.HEAD_ALIGNED),   # head inside (through the opening)
+        (0.006, pr.HEAD_ALIGNED),             # pushing in: connection point still outside + eps
+        (EPS - 0.0005, pr.HEAD_INSERTED),     # C_a inside o's footprint + eps
+    ]
+    for gap, expected in script:
+        assert step_status(pair, *opening_robot_behind(gap)) == expected, gap
+
+
+def test_head_aligned_falls_back_to_decoupled_when_the_head_leaves():
+    pair = pr.make_pair("a", "o", pr.ANCHOR, GEO)
+    assert step_status(pair, *opening_robot_behind(0.008)) == pr.HEAD_ALIGNED
+    assert step_status(pair, *opening_robot_behind(0.010)) == pr.HEAD_ALIGNED
+    assert step_status(pair, *opening_robot_behind(0.02)) == pr.DECOUPLED
+
+
+def test_head_must_come_through_the_opening():
+    pair = pr.make_pair("a", "o", pr.ANCHOR, GEO)
+    # head inside o's footprint but beside the opening, or badly turned: not aligned
+    assert step_status(pair, *opening_robot_behind(0.005, lateral=0.015)) == pr.DECOUPLED
+    assert step_status(pair, *opening_robot_behind(0.005, dtheta=0.8)) == pr.DECOUPLED
+    assert step_status(pair, *opening_robot_behind(0.005, lateral=0.004, dtheta=0.2)) == pr.HEAD_ALIGNED
+
+
+def test_knob_pair_inserts_when_the_knob_is_in_the_hole():
+    pair = pr.make_pair("k", "h", pr.KNOB, GEO)
+    pose_k = (0.0, 0.0, 0.0)
+    assert pr.update_status(pair, pose_k, (0.0, L + 0.01, 0.0), GEO, EPS) == pr.DECOUPLED
+    assert pr.update_status(pair, pose_k, (0.001, L + 0.001, 0.02), GEO, EPS) == pr.HEAD_INSERTED
+    assert pr.update_status(pair, pose_k, (0.0, L, 0.3), GEO, EPS) == pr.DECOUPLED   # turned too far
+
+
+def test_pairbook_moves_inserted_pairs_to_coupled_and_watches_them():
+    book = pr.PairBook(GEO, EPS, 0.005)
+    pair = pr.make_pair("a", "o", pr.ANCHOR, GEO)
+    book.set_goals([pair])
+    poses = dict(zip(("a", "o"), opening_robot_behind(0.0)))
+    poses["a"], poses["o"] = opening_robot_behind(0.008)
+    book.assign_active(poses)
+    assert book.active == [pair]
+    assert book.update(poses) == ([], []) and pair.status == pr.HEAD_ALIGNED
+    poses["a"], poses["o"] = opening_robot_behind(0.0)
+    newly, lost = book.update(poses)
+    assert newly == [pair] and pair.key in book.coupled and not book.goals and not book.active
+    poses["a"], poses["o"] = opening_robot_behind(0.05)       # pulled apart
+    newly, lost = book.update(poses)
+    assert lost == [pair] and not book.coupled and pair.status == pr.DECOUPLED
+
+
+def test_active_pairs_are_conflict_free_and_grow_one_assembly():
+    names = ["r1", "r2", "r3", "r4", "r5"]
+    chain = [pr.make_pair(a, b, pr.ANCHOR, GEO) for a, b in zip(names[:-1], names[1:])]
+    book = pr.PairBook(GEO, EPS, 0.005)
+    priority = {p.key: k for k, p in enumerate([chain[2], chain[0], chain[1], chain[3]])}
+    book.set_goals(chain, priority)
+    poses = {n: (0.0, 0.0, 0.0) for n in names}
+    assert book.assign_active(poses) == [chain[2]]            # before any assembly: the best pair only
+    book.add_coupled(chain[2])
+    book.goals.remove(chain[2])
+    active = book.assign_active(poses)                       # grow r3-r4 at both ends, in parallel
+    assert set(p.key for p in active) == {chain[1].key, chain[3].key}
+    robots = [r for p in active for r in p.robots]
+    assert len(robots) == len(set(robots))
+    # two multi-robot assemblies are never joined
+    book2 = pr.PairBook(GEO, EPS, 0.005)
+    book2.add_coupled(chain[0])
+    book2.add_coupled(chain[2])
+    book2.set_goals([chain[1], chain[3]])
+    assert book2.assign_active(poses) == [chain[3]]
+
+
+# ------------------------------------------------------------------- targets
+def test_generated_targets_connect_as_expected():
+    line = make_target("line", generate("line", 4, GEO), GEO)
+    assert sorted(line.connections) == [(0, 1, pr.ANCHOR), (1, 2, pr.ANCHOR), (2, 3, pr.ANCHOR)]
+    row = make_target("row", generate("row", 3, GEO), GEO)
+    assert sorted(row.connections) == [(0, 1, pr.KNOB), (1, 2, pr.KNOB)]
+
+
+def test_shipped_targets_load_and_mix_pair_types():
+    targets = load_target_file(GEO)
+    ell = targets["ell4"]
+    kinds = sorted(k for _, _, k in ell.connections)
+    assert kinds == [pr.ANCHOR, pr.ANCHOR, pr.KNOB]
+
+
+@pytest.mark.parametrize("slots, fragment", [
+    ([[0, 0, 0], [0.03, 0, 0]], "overlap"),
+    ([[0, 0, 0], [0.2, 0, 0]], "connected"),
+    ([[0, 0, 0], [-0.07, 0, 0.5]], "connected"),               # headings differ: no connection
+    ([[0, 0, 0]], "at least two"),
+    ([[0, 0, float("nan")], [-0.05, 0, 0]], "finite"),
+])
+def test_bad_targets_are_refused(slots, fragment):
+    with pytest.raises(TargetError, match=fragment):
+        make_target("t", slots, GEO)
+
+
+def test_bad_target_files_name_the_key():
+    from puzzlebot_mpc.targets import load_targets
+    with pytest.raises(ConfigError, match="targets.bad"):
+        load_targets({"bad": {"slots": [[0, 0, 0], [0.5, 0, 0]]}}, GEO)
+    with pytest.raises(ConfigError, match="reserved"):
+        load_targets({"line": {"slots": [[0, 0, 0], [-0.05, 0, 0]]}}, GEO)
+
+
+def test_target_resolution_errors():
+    with pytest.raises(TargetError, match="unknown target"):
+        resolve_target("star", None, 3, {}, GEO)
+    with pytest.raises(TargetError, match="either"):
+        resolve_target("line", [(0, 0, 0), (-0.05, 0, 0)], 2, {}, GEO)
+    with pytest.raises(TargetError, match="slots"):
+        assign(make_target("line", generate("line", 3, GEO), GEO), ["a", "b"], np.zeros((2, 3)), GEO)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_assignment_is_optimal_by_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    n = 3 + seed % 3
+    robots = ["r%d" % k for k in range(n)]
+    poses = np.column_stack([rng.uniform(-0.3, 0.3, (n, 2)), rng.uniform(-math.pi, math.pi, n)])
+    target = make_target("line", generate("line", n, GEO), GEO)
+    a = assign(target, robots, poses, GEO)
+    # optimal for the chosen placement ...
+    world = place(target.slots, *a.placement)
+    cost = assignment_cost(poses, world, 1.0, L)
+    chosen = sum(cost[robots.index(r), s] for r, s in a.slot_of.items())
+    assert chosen == pytest.approx(brute_force_assignment(cost), abs=1e-12)
+    assert chosen == pytest.approx(a.cost, abs=1e-12)
+    # ... and no better permutation exists at any other candidate heading tried on a fine grid
+    # that the search does not cover is allowed; but each permutation at the chosen heading is worse
+    assert all(sum(cost[r, s] for r, s in enumerate(perm)) >= chosen - 1e-12 for perm in permutations(range(n)))
+    # goal pairs follow the slots' connections
+    slot_robot = {s: r for r, s in a.slot_of.items()}
+    assert sorted(p.key for p in a.pairs) == sorted((slot_robot[i], slot_robot[j]) for i, j, _ in target.connections)
+
+
+def test_mst_matches_brute_force_total_weight():
+    rng = np.random.default_rng(7)
+    pts = rng.uniform(0, 1, (5, 2))
+    edges, paths = distance_mst(pts)
+    total = sum(d for _, _, d in edges)
+    # brute force over all spanning trees of 5 nodes (Pruefer sequences)
+    best = math.inf
+    import itertools
+    for seq in itertools.product(range(5), repeat=3):
+        degree = [1] * 5
+        for s in seq:
+            degree[s] += 1
+        seq = list(seq)
+        w = 0.0
+        deg = degree[:]
+        for s in seq:
+            leaf = min(i for i in range(5) if deg[i] == 1)
+            w += np.linalg.norm(pts[leaf] - pts[s])
+            deg[leaf] -= 1
+            deg[s] -= 1
+        u, v = [i for i in range(5) if deg[i] == 1]
+        w += np.linalg.norm(pts[u] - pts[v])
+        best = min(best, w)
+    assert total == pytest.approx(best, rel=1e-9)
+    assert len(edges) == 4 and np.all(np.isfinite(paths))
