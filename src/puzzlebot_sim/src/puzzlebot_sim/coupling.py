@@ -36,11 +36,16 @@ class PhysicalPair:
 
 
 def _in_opening(p, rp, tolerance):
-    """True when point ``p`` (opening robot's base_link) is inside the mouth/slit cavity."""
+    """True when point ``p`` (opening robot's base_link) is inside the mouth/slit cavity
+    (or up in the lock slot above it)."""
     h = rp.body_side / 2.0
-    return (h - rp.cavity_depth - tolerance <= p[0] < h
-            and abs(p[1]) <= rp.slit_width / 2.0 + tolerance
-            and abs(p[2] - rp.opening_z) <= rp.mouth_height / 2.0 + tolerance)
+    if not (h - rp.cavity_depth - tolerance <= p[0] < h and abs(p[1]) <= rp.slit_width / 2.0 + tolerance):
+        return False
+    dz = p[2] - rp.opening_z
+    top = rp.mouth_height / 2.0
+    if p[0] <= h - rp.lip_depth - rp.lock_sill and abs(p[1]) <= rp.lock_width / 2.0:
+        top += rp.lock_height
+    return -rp.mouth_height / 2.0 - tolerance <= dz <= top + tolerance
 
 
 def classify(head_tip, barb_tips, rp, tolerance=0.0005):

@@ -60,14 +60,17 @@ class RobotParams:
     lip_depth: float = 0.002         # m, thickness of the lips (x); their inner ends are half-cylinders
     slit_width: float = 0.024        # m, full width of the cavity behind the lips
     cavity_depth: float = 0.0145     # m, front face to the battery box
+    lock_height: float = 0.005       # m, lock slot: a recess in the slits' ceiling behind a sill, into which
+    lock_width: float = 0.012        # m   the head rises when the anchor robot tips over an edge (edge lock)
+    lock_sill: float = 0.003         # m, solid ceiling between the lips and the lock slot
     battery_x: float = 0.020         # m, battery box (x, y, z) inside the body
     battery_y: float = 0.026         # m
     battery_z: float = 0.020         # m
     # anchor holder: a pocket in the back face, closed by a retaining wall with a slot
-    holder_depth: float = 0.013      # m, pocket depth incl. the retaining wall (5 mm anchor travel)
+    holder_depth: float = 0.015      # m, pocket depth incl. the retaining wall (5 mm anchor travel)
     holder_wall: float = 0.002       # m, retaining wall thickness
-    holder_width: float = 0.007      # m, pocket width (y): anchor base's lateral play +/-0.5 mm
-    holder_height: float = 0.0062    # m, pocket height (z): anchor pitch < 0.1 rad
+    holder_width: float = 0.0084     # m, pocket width (y): anchor base's lateral play +/-0.2 mm
+    holder_height: float = 0.0082    # m, pocket height (z)
     holder_slot_width: float = 0.0055  # m, slot in the retaining wall: the bar's yaw play
     holder_slot_height: float = 0.0045  # m: the bar rests on the slot's bottom (pitch play)
     # side connectors for rigid (bridge) coupling: knob on the left (+y), hole on the right (-y)
@@ -98,6 +101,11 @@ class RobotParams:
         if self.lip_depth >= self.cavity_depth or self.cavity_depth + self.battery_x >= self.body_side:
             raise ConfigError("%s: need lip_depth < cavity_depth and cavity_depth + battery_x < body_side"
                               % where)
+        if self.lock_width > self.slit_width or self.lip_depth + self.lock_sill >= self.cavity_depth:
+            raise ConfigError("%s: the lock slot must fit above the slits (lock_width <= slit_width, "
+                              "lip_depth + lock_sill < cavity_depth)" % where)
+        if abs(self.opening_z) + self.mouth_height / 2 + self.lock_height >= half_h:
+            raise ConfigError("%s: the lock slot does not fit under the body's top" % where)
         if abs(self.opening_z) + max(self.mouth_height, self.holder_height) / 2 >= half_h:
             raise ConfigError("%s: opening/holder (opening_z = %g) do not fit in the body height" % (where, self.opening_z))
         if self.holder_slot_width > self.holder_width or self.holder_slot_height > self.holder_height:
@@ -151,12 +159,12 @@ class AnchorParams:
     (barbs flare); see puzzlebot_sim/anchor.py for the mapping.
     """
 
-    base_radius: float = 0.003       # m, the base is a ball in the holder (free yaw, one contact) ...
+    base_radius: float = 0.004       # m, the base is a ball in the holder (free yaw, one contact) ...
     collar_width: float = 0.004      # m ... with a collar (box as long as the ball, this wide and high)
     collar_height: float = 0.002     # m     whose flat ends square the anchor up against the holder's walls
     base_mass: float = 0.0010        # kg
-    length: float = 0.0233           # m, base centre to head tip
-    neck_x: float = 0.0065           # m, base centre to the neck joint
+    length: float = 0.0243           # m, base centre to head tip
+    neck_x: float = 0.0075           # m, base centre to the neck joint
     bar_width: float = 0.002         # m
     bar_height: float = 0.004        # m
     head_width: float = 0.0055       # m, diamond head (also its length)
@@ -172,7 +180,7 @@ class AnchorParams:
     inertia_radius: float = 0.005    # m, radius of gyration floor of the anchor's links (solver conditioning)
     barb_fold_limit: float = 0.03    # rad, smallest barb angle (folded against the bar)
     barb_flip_limit: float = 3.1     # rad, largest barb angle (flipped forward, pulled out)
-    barb_servo_rate: float = 40.0    # 1/s, velocity servo gain pulling a barb back to rest
+    barb_servo_rate: float = 20.0    # 1/s, velocity servo gain pulling a barb back to rest
     barb_min_torque: float = 2.0e-5  # N m, restoring torque floor (returns the barb to rest)
     neck_max_torque: float = 0.01    # N m, pitch stiffness limit of the neck (TPU bending)
     neck_servo_rate: float = 20.0    # 1/s
@@ -241,7 +249,7 @@ class AnchorParams:
 class SimParams:
     """Sim node / SimWorld options (config/sim.yaml, ``sim``)."""
 
-    physics_rate: int = 400          # Hz, Bullet fixed step
+    physics_rate: int = 200          # Hz, Bullet fixed step (accuracy vs speed: docs/sim.md)
     pose_rate: int = 100             # Hz, vicon topics and tf
     real_time_factor: float = 0.0    # 1 = wall-clock pace, 0 = as fast as possible
     cmd_timeout: float = 0.5         # s, sim time
@@ -252,7 +260,7 @@ class SimParams:
     world: str = "flat"
     gui: bool = False
     seed: int = 0
-    solver_iterations: int = 50      # Bullet constraint solver iterations per step
+    solver_iterations: int = 15      # Bullet constraint solver iterations per step
     erp: float = 0.2                 # contact error reduction (per step)
     anchors: bool = True             # give every robot its soft anchor
     # injectable effects (off by default)

@@ -56,8 +56,8 @@ class ForceProfile:
 class ForceRig:
     """The rig in its own physics client (DIRECT)."""
 
-    def __init__(self, robot_params=RobotParams(), anchor_params=AnchorParams(), physics_rate=400,
-                 solver_iterations=50, erp=0.2, settle_s=0.05):
+    def __init__(self, robot_params=RobotParams(), anchor_params=AnchorParams(), physics_rate=200,
+                 solver_iterations=15, erp=0.2, settle_s=0.05):
         self.rp, self.ap = robot_params, anchor_params
         self.dt = 1.0 / physics_rate
         self.settle_steps = max(1, int(round(settle_s * physics_rate)))

@@ -177,7 +177,7 @@ def check_features(text, name="robot"):
 def body_parts(p):
     """Boxes of the robot body in base_link: {"shell": [...], "lips": [...], "battery": box}.
 
-    The shell (body minus mouth/slits, holder pocket and slot, side hole) and
+    The shell (body minus mouth/slits, lock slot, holder pocket and slot, side hole) and
     the lips are collision shapes; the battery box is drawn, and its front face
     is the slits' back wall (solid shell behind the cavity).
     """
@@ -189,6 +189,8 @@ def body_parts(p):
                (battery_front, p.battery_y / 2, zo + p.battery_z / 2))
     voids = [
         ((battery_front, -half_slit, zo - mz), (h, half_slit, zo + mz)),                    # mouth + slits
+        ((battery_front, -p.lock_width / 2, zo + mz),
+         (h - p.lip_depth - p.lock_sill, p.lock_width / 2, zo + mz + p.lock_height)),       # lock slot
         ((-h + p.holder_wall, -p.holder_width / 2, zo - p.holder_height / 2),
          (-h + p.holder_depth, p.holder_width / 2, zo + p.holder_height / 2)),               # holder pocket
         ((-h, -p.holder_slot_width / 2, zo - p.holder_slot_height / 2),

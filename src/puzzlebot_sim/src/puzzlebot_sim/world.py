@@ -151,8 +151,8 @@ class SimWorld:
     ``mocap`` (MocapModel).
     """
 
-    def __init__(self, robot_params, starts, world="flat", physics_rate=400, gui=False, *,
-                 anchor_params=AnchorParams(), world_params=None, solver_iterations=50, erp=0.2, seed=0,
+    def __init__(self, robot_params, starts, world="flat", physics_rate=200, gui=False, *,
+                 anchor_params=AnchorParams(), world_params=None, solver_iterations=15, erp=0.2, seed=0,
                  actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel()):
         if world not in WORLDS:
             raise ConfigError("unknown world %r; known worlds: %s" % (world, ", ".join(sorted(WORLDS))))
@@ -281,6 +281,23 @@ class SimWorld:
         for j in range(pb.getNumJoints(body, physicsClientId=c)):
             pb.setJointMotorControl2(body, j, pb.VELOCITY_CONTROL, force=0, physicsClientId=c)
         return body
+
+    def reset_anchor(self, name, yaw=0.0):
+        """Put ``name``'s anchor back in its holder (pushed in, barbs at rest), turned by
+        ``yaw`` [rad] relative to the robot (experiments: the anchor's free yaw)."""
+        c, body = self.client, self.robots[name]["anchor"]
+        if body is None:
+            return
+        rx, ry, ryaw = self.pose2d(name)
+        z = self.pose(name)[0][2] + self.params.opening_z
+        x = rx + math.cos(ryaw) * self._anchor_home_x
+        y = ry + math.sin(ryaw) * self._anchor_home_x
+        pb.resetBasePositionAndOrientation(body, [x, y, z], pb.getQuaternionFromEuler([0, 0, ryaw + yaw]),
+                                           physicsClientId=c)
+        pb.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=c)
+        for j in range(3):
+            pb.resetJointState(body, j, 0.0, 0.0, physicsClientId=c)
+        self.robots[name]["anchor_q"] = None
 
     # --------------------------------------------------------------- control
     def set_command(self, name, v, w):
