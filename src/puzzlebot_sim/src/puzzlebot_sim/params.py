@@ -177,7 +177,7 @@ class AnchorParams:
     barb_tip_radius: float = 0.001   # m, rounded tip: a vertical cylinder ending the barb
     barb_angle: float = 0.55         # rad, rest angle of a barb from the middle bar
     barb_mass: float = 0.001         # kg each (heavier than TPU: solver stability)
-    inertia_radius: float = 0.005    # m, radius of gyration floor of the anchor's links (solver conditioning)
+    inertia_radius: float = 0.01     # m, radius of gyration floor of the anchor's links (solver conditioning)
     barb_fold_limit: float = 0.03    # rad, smallest barb angle (folded against the bar)
     barb_flip_limit: float = 3.1     # rad, largest barb angle (flipped forward, pulled out)
     barb_servo_rate: float = 20.0    # 1/s, velocity servo gain pulling a barb back to rest
