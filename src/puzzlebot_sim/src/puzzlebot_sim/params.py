@@ -251,6 +251,7 @@ class SimParams:
 
     physics_rate: int = 200          # Hz, Bullet fixed step (accuracy vs speed: docs/sim.md)
     pose_rate: int = 100             # Hz, vicon topics and tf
+    pairs_rate: int = 10             # Hz, physical_pairs topic
     real_time_factor: float = 0.0    # 1 = wall-clock pace, 0 = as fast as possible
     cmd_timeout: float = 0.5         # s, sim time
     sync_topic: str = ""             # lockstep with a controller (empty: off)
@@ -276,13 +277,16 @@ class SimParams:
         return from_mapping(cls, data, where)
 
     def check(self, where="sim"):
-        require_positive(self, ["physics_rate", "pose_rate", "cmd_timeout", "sync_period",
+        require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "cmd_timeout", "sync_period",
                                 "sync_timeout", "sync_startup_timeout", "solver_iterations", "erp"], where)
         if self.real_time_factor < 0:
             raise ConfigError("%s.real_time_factor: must be >= 0 (0 = as fast as possible)" % where)
         if self.physics_rate % self.pose_rate:
             raise ConfigError("%s: physics_rate (%d Hz) must be an integer multiple of pose_rate (%d Hz)"
                               % (where, self.physics_rate, self.pose_rate))
+        if self.pose_rate % self.pairs_rate:
+            raise ConfigError("%s: pose_rate (%d Hz) must be an integer multiple of pairs_rate (%d Hz)"
+                              % (where, self.pose_rate, self.pairs_rate))
         ticks = self.sync_period * self.pose_rate
         if abs(ticks - round(ticks)) > 1e-6:
             raise ConfigError("%s: sync_period (%g s) must be a whole number of pose periods (1/%d s)"

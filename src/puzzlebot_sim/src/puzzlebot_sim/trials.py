@@ -214,8 +214,8 @@ def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams()
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     finally:
         w.close()
-    return {"robots": robots, "sim_seconds": sim_seconds, "wall_seconds": round(wall, 3),
-            "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 3)}
+    return {"robots": robots, "sim_seconds": sim_seconds, "wall_seconds": round(wall, 4),
+            "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 4)}
 
 
 def summarize(results):
