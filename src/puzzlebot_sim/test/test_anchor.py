@@ -55,15 +55,16 @@ def points(head, tips):
 def test_classify_coupling_states():
     p = RobotParams()
     h = p.body_side / 2
-    seated = ((h - 0.012, 0.0, 0.0), [(h - 0.006, 0.006, 0.0), (h - 0.006, -0.006, 0.0)])
+    z = p.opening_z
+    seated = ((h - 0.012, 0.0, z), [(h - 0.006, 0.006, z), (h - 0.006, -0.006, z)])
     assert classify(*points(*seated), p) == HEAD_INSERTED
-    half_in = ((h - 0.005, 0.0, 0.0), [(h + 0.001, 0.006, 0.0), (h + 0.001, -0.006, 0.0)])
+    half_in = ((h - 0.005, 0.0, z), [(h + 0.001, 0.006, z), (h + 0.001, -0.006, z)])
     assert classify(*points(*half_in), p) == HEAD_ALIGNED
-    one_out = ((h - 0.012, 0.0, 0.0), [(h - 0.006, 0.002, 0.0), (h - 0.006, -0.006, 0.0)])  # tip in the mouth
+    one_out = ((h - 0.012, 0.0, z), [(h - 0.006, 0.002, z), (h - 0.006, -0.006, z)])  # tip in the mouth
     assert classify(*points(*one_out), p) == HEAD_ALIGNED
-    outside = ((h + 0.003, 0.0, 0.0), [(h + 0.01, 0.006, 0.0), (h + 0.01, -0.006, 0.0)])
+    outside = ((h + 0.003, 0.0, z), [(h + 0.01, 0.006, z), (h + 0.01, -0.006, z)])
     assert classify(*points(*outside), p) == DECOUPLED
-    too_high = ((h - 0.012, 0.0, 0.02), [(h - 0.006, 0.006, 0.02), (h - 0.006, -0.006, 0.02)])
+    too_high = ((h - 0.012, 0.0, z + 0.02), [(h - 0.006, 0.006, z + 0.02), (h - 0.006, -0.006, z + 0.02)])
     assert classify(*points(*too_high), p) == DECOUPLED
-    in_lock_slot = ((h - 0.012, 0.0, p.mouth_height / 2 + 0.003), seated[1])
+    in_lock_slot = ((h - 0.012, 0.0, z + p.mouth_height / 2 + 0.003), seated[1])
     assert classify(*points(*in_lock_slot), p) == HEAD_INSERTED

@@ -54,7 +54,7 @@ class RobotParams:
     caster_clearance: float = 0.0005  # m, caster bottom above the floor: the wheels carry the weight
     wheel_base: float = 0.04         # m, track used to split (v, w) into wheel speeds
     # front opening: a mouth between two lips, the slits (a cavity) behind, the battery box behind that
-    opening_z: float = 0.0           # m, height of the opening's (and the anchor's) centre line
+    opening_z: float = -0.010        # m, height of the opening's (and the anchor's) centre line above base_link
     mouth_width: float = 0.0085      # m, gap between the lips
     mouth_height: float = 0.009      # m, height of mouth and slits
     lip_depth: float = 0.002         # m, thickness of the lips (x); their inner ends are half-cylinders
@@ -165,17 +165,17 @@ class AnchorParams:
     base_mass: float = 0.0010        # kg
     length: float = 0.0243           # m, base centre to head tip
     neck_x: float = 0.0075           # m, base centre to the neck joint
-    bar_width: float = 0.002         # m
+    bar_width: float = 0.003         # m
     bar_height: float = 0.004        # m
     head_width: float = 0.0055       # m, diamond head (also its length)
-    head_height: float = 0.004       # m
+    head_height: float = 0.006       # m
     head_mass: float = 0.0004        # kg, bar + head
     hinge_back: float = 0.0005       # m, barb hinge along the head's rear edge from its side corner
     barb_length: float = 0.007       # m
     barb_thickness: float = 0.002    # m
     barb_height: float = 0.004       # m
     barb_tip_radius: float = 0.001   # m, rounded tip: a vertical cylinder ending the barb
-    barb_angle: float = 0.55         # rad, rest angle of a barb from the middle bar
+    barb_angle: float = 0.65         # rad, rest angle of a barb from the middle bar
     barb_mass: float = 0.001         # kg each (heavier than TPU: solver stability)
     inertia_radius: float = 0.01     # m, radius of gyration floor of the anchor's links (solver conditioning)
     barb_fold_limit: float = 0.03    # rad, smallest barb angle (folded against the bar)
