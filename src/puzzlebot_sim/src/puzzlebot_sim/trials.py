@@ -190,20 +190,22 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=20.0, sim
 def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
     """Wall-clock speed of a headless world of ``robots`` robots with anchors.
 
-    Layout: robots in coupled pairs (an odd one alone) on a grid 0.2 m apart;
-    every robot drives (v = 0.03 m/s, gentle seeded turns) so anchors ride in
-    their holders and coupled anchors carry load. Returns robots, sim_seconds,
-    wall_seconds, real_time_factor (sim / wall) and cpu_seconds.
+    Layout on a grid 0.2 m apart: half of the robots (rounded up to a pair)
+    stand in coupled pairs, the others alone; every robot drives (v = 0.03
+    m/s, gentle seeded turns), so every anchor rides in its holder and the
+    coupled ones carry load. Returns robots, sim_seconds, wall_seconds,
+    real_time_factor (sim / wall) and cpu_seconds.
     """
     rng = np.random.default_rng(seed)
-    starts, k = [], 0
-    cols = max(1, int(math.ceil(math.sqrt(robots / 2.0))))
-    while len(starts) < robots:
+    coupled = min(robots, 2 * int(math.ceil(robots / 4.0)))
+    cells = coupled // 2 + (robots - coupled)
+    cols = max(1, int(math.ceil(math.sqrt(cells))))
+    starts = []
+    for k in range(cells):
         cx, cy = 0.2 * (k % cols), 0.2 * (k // cols)
         starts.append(RobotStart("r%d" % len(starts), cx, cy, 0.0))
-        if len(starts) < robots:
+        if k < coupled // 2:
             starts.append(RobotStart("r%d" % len(starts), cx - robot.body_side - MATE_GAP, cy, 0.0))
-        k += 1
     w = _world(starts, replace(sim, seed=seed), robot, anchor)
     try:
         turns = {s.name: rng.uniform(-0.3, 0.3) for s in starts}
@@ -212,10 +214,12 @@ def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams()
         wall0, cpu0 = time.perf_counter(), time.process_time()
         w.run(sim_seconds)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+        pairs = len(w.physical_pairs())
     finally:
         w.close()
     return {"robots": robots, "sim_seconds": sim_seconds, "wall_seconds": round(wall, 4),
-            "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 4)}
+            "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 4),
+            "coupled_pairs_at_end": pairs}
 
 
 def summarize(results):

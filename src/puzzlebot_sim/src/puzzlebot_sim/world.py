@@ -222,19 +222,20 @@ class SimWorld:
     def _set_group(self, body, link, group):
         pb.setCollisionFilterGroupMask(body, link, group, _MASKS[group], physicsClientId=self.client)
 
-    def _urdf(self, kind, text):
+    def _urdf(self, kind, make_text):
+        """Path of this world's URDF of ``kind`` (written once; PyBullet caches files by path)."""
         path = self._urdf_paths.get(kind)
         if path is None:
             path = os.path.join(self._tmp.name, "%s.urdf" % kind)
             with open(path, "w") as f:
-                f.write(text)
+                f.write(make_text())
             self._urdf_paths[kind] = path
         return path
 
     def _spawn(self, s):
         c, p = self.client, self.params
         kind = "pilot" if s.pilot else "robot"
-        path = self._urdf(kind, robot_urdf(p, name=kind, pilot=s.pilot))
+        path = self._urdf(kind, lambda: robot_urdf(p, name=kind, pilot=s.pilot))
         z0 = self.terrain.height(s.x, s.y)
         orn = pb.getQuaternionFromEuler([0, 0, s.yaw])
         body = pb.loadURDF(path, [s.x, s.y, z0 + p.body_centre_height + 1e-4], orn,
@@ -266,7 +267,7 @@ class SimWorld:
 
     def _spawn_anchor(self, s, z0):
         c, p, a = self.client, self.params, self.anchor_params
-        path = self._urdf("anchor", anchor_urdf(a))
+        path = self._urdf("anchor", lambda: anchor_urdf(a))
         cy, sy = math.cos(s.yaw), math.sin(s.yaw)
         x = s.x + cy * self._anchor_home_x
         y = s.y + sy * self._anchor_home_x
