@@ -20,7 +20,6 @@ dimensions).
 """
 
 import csv
-import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from typing import List
 import numpy as np
 import pybullet as pb
 
-from puzzlebot_sim.anchor import AnchorGeometry
+from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
 from puzzlebot_sim.params import AnchorParams, RobotParams
 from puzzlebot_sim.urdf import URDF_FLAGS, anchor_urdf
 
@@ -74,10 +73,7 @@ class ForceRig:
                                   physicsClientId=c)
         for link in range(-1, 3):
             pb.changeDynamics(self.anchor, link, lateralFriction=anchor_params.barb_friction, physicsClientId=c)
-        # the rig holds the anchor straight: the neck (TPU bending) is locked at zero
         self.probe = self._make_probe()
-        from puzzlebot_sim.anchor import BarbTorqueMap
-
         self.map = BarbTorqueMap(anchor_params, robot_params.mouth_width, robot_params.lip_depth / 2)
         self.geometry = AnchorGeometry(anchor_params)
 
@@ -114,6 +110,7 @@ class ForceRig:
         pb.resetBasePositionAndOrientation(self.probe, [x, 0, 0.1], [0, 0, 0, 1], physicsClientId=self.client)
 
     def _settle_joints(self):
+        """One step with the barb servos as in SimWorld; the neck is held straight (the rig clamps the anchor)."""
         a, c = self.ap, self.client
         states = pb.getJointStates(self.anchor, [0, 1, 2], physicsClientId=c)
         q = [s[0] for s in states]
@@ -215,5 +212,3 @@ def characterise(out_dir, robot_params=RobotParams(), anchor_params=AnchorParams
     write_png(profile, os.path.join(out_dir, "force_profile.png"), anchor_params, robot_params.push_force)
     return profile
 
-
-__all__ = ["ForceRig", "ForceProfile", "characterise", "write_csv", "write_png", "math"]

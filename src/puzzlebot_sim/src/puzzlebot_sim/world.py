@@ -33,9 +33,9 @@ from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
 from puzzlebot_common.kinematics import wheel_speeds
 from puzzlebot_sim import coupling
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
-from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
-from puzzlebot_sim.urdf import (ANCHOR_JOINTS, CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS,
-                                anchor_urdf, robot_urdf)
+from puzzlebot_sim.params import AnchorParams, WorldParams
+from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
+                                robot_urdf)
 from puzzlebot_sim.worlds import WORLDS
 
 #: Collision groups: terrain, robot bodies, wheels and casters (terrain only), anchors.
@@ -502,5 +502,3 @@ class SimWorld:
     def __exit__(self, *exc):
         self.close()
 
-
-__all__ = ["SimWorld", "RobotStart", "MocapModel", "check_start_poses", "mated", "RobotParams", "SimParams"]
