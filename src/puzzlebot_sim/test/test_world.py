@@ -1,15 +1,19 @@
 import math
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 
+import pybullet as pb
 import pytest
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import wrap_angle
-from puzzlebot_sim.params import RobotParams, SimParams
-from puzzlebot_sim.scenario_starts import starts_from_config
-from puzzlebot_sim.urdf import robot_urdf
-from puzzlebot_sim.world import RobotStart, SimWorld
 from puzzlebot_common.robots import parse_robot_list
+from puzzlebot_mpc.effects import ActuatorModel
+from puzzlebot_sim.coupling import HEAD_INSERTED
+from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.scenario_starts import starts_from_config
+from puzzlebot_sim.urdf import URDF_MARGIN, anchor_urdf, body_parts, robot_urdf
+from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld
 
 
 def test_urdf_is_well_formed_with_wheels_and_casters():
@@ -18,11 +22,27 @@ def test_urdf_is_well_formed_with_wheels_and_casters():
     assert {"base_link", "left_wheel", "right_wheel", "front_caster", "rear_caster"} <= links
     joints = {j.get("name"): j.get("type") for j in root.findall("joint")}
     assert joints["left_wheel_joint"] == "continuous"
+    materials = {m.get("name") for m in root.iter("material")}
+    assert {"mat_lip", "mat_knob", "mat_battery"} <= materials           # opening, side knob, battery box
+    pilot = ET.fromstring(robot_urdf(RobotParams(), pilot=True))
+    wheels = [j for j in pilot.findall("joint") if j.get("type") == "continuous"]
+    assert len(wheels) == 4 and not [l for l in pilot.findall("link") if "caster" in l.get("name")]
+    anchor = ET.fromstring(anchor_urdf(AnchorParams()))
+    assert {j.get("name") for j in anchor.findall("joint")} == {"neck_joint", "left_barb_joint", "right_barb_joint"}
+
+
+def test_body_has_no_part_thinner_than_bullets_margin():
+    p = RobotParams()
+    for lo, hi in body_parts(p)["shell"]:
+        assert min(b - a for a, b in zip(lo, hi)) >= 2 * URDF_MARGIN - 1e-12
+    with pytest.raises(ConfigError, match="thinner than 2.0 mm"):
+        robot_urdf(replace(p, lip_depth=0.0012))
+    with pytest.raises(ConfigError, match="radius 0.50 mm is below"):
+        robot_urdf(replace(p, knob_radius=0.0005))
 
 
 def drive(world, seconds):
-    for _ in range(int(round(seconds / world.dt))):
-        world.step()
+    world.run(seconds)
 
 
 def test_robot_drives_straight_and_turns():
@@ -37,13 +57,100 @@ def test_robot_drives_straight_and_turns():
         assert w.time == pytest.approx(2.5)
 
 
-def test_deterministic_for_same_commands():
+@pytest.mark.parametrize("v", [0.05, 0.2])
+def test_commanded_speed_is_driven_within_one_percent(v):
+    # The wheels' collision spheres have the exact 10 mm radius and carry the weight (casters just
+    # off the floor): no rolling-radius error, no slip.
+    for pilot in (False, True):
+        with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0, pilot)]) as w:
+            w.set_command("pz1", v, 0.0)
+            w.run(0.5)
+            x0, t0 = w.pose2d("pz1")[0], w.time
+            w.run(1.0)
+            speed = (w.pose2d("pz1")[0] - x0) / (w.time - t0)
+            assert speed == pytest.approx(v, rel=0.01), (pilot, speed)
+
+
+def test_robot_pushes_with_about_half_a_newton():
+    with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)]) as w:
+        c = w.client
+        wall = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[0.01, 0.1, 0.05],
+                                                             physicsClientId=c), -1, [0.04, 0, 0.05],
+                                  physicsClientId=c)
+        w.set_command("pz1", 0.05, 0.0)
+        w.run(1.0)
+        force = sum(cp[9] for cp in pb.getContactPoints(w.robots["pz1"]["body"], wall, physicsClientId=c))
+        assert 0.42 < force <= 0.52
+
+
+def test_deterministic_for_same_commands_and_seed():
     def run():
-        with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0.3)]) as w:
+        mocap = MocapModel(position_std=0.001, yaw_std=0.01, dropout=0.2)
+        with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0.3)], seed=7, mocap=mocap) as w:
             w.set_command("pz1", 0.04, 0.7)
-            drive(w, 1.0)
-            return w.pose2d("pz1")
+            out = []
+            for _ in range(20):
+                w.run(0.05)
+                out.append(w.measure("pz1"))
+            return w.pose2d("pz1"), w.anchor_pose2d("pz1"), out
     assert run() == run()
+
+
+def test_mocap_effects():
+    mocap = MocapModel(position_std=0.002, dropout=0.3, heading_offset=0.1)
+    with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0.0)], seed=1, mocap=mocap) as w:
+        w.run(0.2)
+        got = [w.measure("pz1") for _ in range(400)]
+        measured = [m for m in got if m is not None]
+        assert 0.2 < 1 - len(measured) / len(got) < 0.4
+        x, y, yaw = w.pose2d("pz1")
+        errors = [m[0][0] - x for m in measured]
+        assert 0.0015 < (sum(e * e for e in errors) / len(errors)) ** 0.5 < 0.0025
+        yaws = [pb.getEulerFromQuaternion(m[1])[2] for m in measured]
+        assert all(abs(wrap_angle(v - yaw - 0.1)) < 1e-6 for v in yaws)
+
+
+def test_actuator_effects_delay_and_wheel_imbalance():
+    model = ActuatorModel().add("input_delay", {"delay_s": 0.3}).add("heading_offset", {"offset_rad": 0.05})
+    with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)], actuator_model=model) as w:
+        w.run(0.1)
+        w.set_command("pz1", 0.05, 0.0)
+        w.run(0.25)
+        assert abs(w.pose2d("pz1")[0]) < 0.001                 # still waiting for the delayed command
+        w.run(0.5)
+        assert w.pose2d("pz1")[0] > 0.01
+        assert w.driven_velocity("pz1") == (0.05, 0.0)
+        yaw = pb.getEulerFromQuaternion(w.measure("pz1")[1])[2]
+        assert yaw - w.pose2d("pz1")[2] == pytest.approx(0.05, abs=1e-6)
+    with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)], wheel_imbalance=0.05) as w:
+        w.set_command("pz1", 0.05, 0.0)
+        w.run(2.0)
+        assert w.pose2d("pz1")[2] > 0.2                          # right wheel faster: curves left
+
+
+def test_coupled_start_and_physical_pairs():
+    starts = [RobotStart("a", 0, 0, 0), RobotStart("o", -0.0503, 0, 0), RobotStart("x", 0, 0.2, 0)]
+    with SimWorld(RobotParams(), starts) as w:
+        w.run(0.3)
+        pairs = w.physical_pairs()
+        assert [(p.anchor_robot, p.opening_robot, p.status) for p in pairs] == [("a", "o", HEAD_INSERTED)]
+        ax, ay, ayaw = w.anchor_pose2d("a")
+        assert -0.022 < ax < -0.012 and abs(ay) < 0.001           # in its holder, behind the body centre
+
+
+def test_worlds_place_robots_on_the_stages():
+    wp = WorldParams(stage_height=0.06)
+    with SimWorld(RobotParams(), [RobotStart("pz1", -0.1, 0, 0)], world="step", world_params=wp) as w:
+        w.run(0.3)
+        assert w.pose("pz1")[0][2] == pytest.approx(0.06 + RobotParams().body_centre_height, abs=0.002)
+    with SimWorld(RobotParams(), [RobotStart("pz1", -0.1, 0, 0), RobotStart("pz2", 0.1, 0, math.pi)],
+                  world="gap") as w:
+        w.run(0.3)
+        for n in ("pz1", "pz2"):
+            assert w.pose(n)[0][2] > 0.05
+    with pytest.raises(ConfigError, match="at least one robot height"):
+        SimWorld(RobotParams(), [RobotStart("pz1", -0.1, 0, 0)], world="step",
+                 world_params=WorldParams(stage_height=0.03))
 
 
 def test_bad_setup_gives_clear_errors():
@@ -51,10 +158,14 @@ def test_bad_setup_gives_clear_errors():
         SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)], world="moon")
     with pytest.raises(ConfigError, match="inside each other"):
         SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0), RobotStart("pz2", 0.03, 0.01, 0.5)])
+    with pytest.raises(ConfigError, match="the anchor of robot pz1 would start inside robot pz2"):
+        SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0), RobotStart("pz2", -0.06, 0.0, 0.0)])
     with pytest.raises(ConfigError, match="robot.wheel_radius"):
         RobotParams.from_dict({"wheel_radius": 0})
     with pytest.raises(ConfigError, match="integer multiple"):
         SimParams.from_dict({"physics_rate": 250, "pose_rate": 100})
+    with pytest.raises(ConfigError, match="anchor.backward_profile_mm: must start at 0 and increase"):
+        AnchorParams.from_dict({"backward_profile_mm": [0.0, 2.0, 1.0], "backward_profile_n": [0.0, 0.1, 0.2]})
     robots = parse_robot_list(["pz1", "pz2"])
     with pytest.raises(ConfigError, match="no start pose for robot pz2"):
         starts_from_config(robots, {"pz1": [0, 0, 0]})

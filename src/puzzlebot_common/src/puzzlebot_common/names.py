@@ -11,6 +11,8 @@ WORLD_FRAME = "world"
 STACK_NS = "/puzzlebot"
 
 CONNECTION_PAIRS_TOPIC = STACK_NS + "/connection_pairs"
+#: Anchor-opening couplings read off the simulated bodies (sim node only).
+PHYSICAL_PAIRS_TOPIC = STACK_NS + "/sim/physical_pairs"
 SOLVER_STATS_TOPIC = STACK_NS + "/mpc/solver_stats"
 BEHAVIOR_STATUS_TOPIC = STACK_NS + "/mpc/behavior_status"
 SET_BEHAVIOR_SERVICE = STACK_NS + "/mpc/set_behavior"

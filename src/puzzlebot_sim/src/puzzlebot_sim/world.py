@@ -1,10 +1,23 @@
-"""A Bullet world with PuzzleBots, stepped at a fixed rate.
+"""A Bullet world with PuzzleBots and their soft anchors, stepped at a fixed rate.
 
+``SimWorld`` is the ROS-free simulation core: the sim node wraps it, and
+experiments use it in-process (many worlds in parallel processes, no ROS).
 Every PyBullet call passes this world's physics client id, so several worlds
-can live in one process (parallel trials). The world never sleeps or reads
-the wall clock: pacing belongs to the caller.
+can live in one process. The world never sleeps or reads the wall clock:
+pacing belongs to the caller. For the same parameters, start poses, seed and
+command sequence a world produces the same trajectory.
 
-Units: metres, seconds, radians; poses in the ``world`` frame.
+Typical use::
+
+    with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)], seed=3) as w:
+        w.set_command("pz1", 0.05, 0.0)      # body velocity (m/s, rad/s)
+        w.run(2.0)                           # simulated seconds
+        x, y, yaw = w.pose2d("pz1")
+        pairs = w.physical_pairs()           # which anchor sits in which opening
+
+Units: metres, seconds, radians; poses in the ``world`` frame. A robot's
+pose is its ``base_link`` (body centre, x forward); an anchor's pose is the
+centre of its base block, axes parallel to the robot's at rest.
 """
 
 import math
@@ -14,11 +27,30 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as pb
-import pybullet_data
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
 from puzzlebot_common.kinematics import wheel_speeds
-from puzzlebot_sim.urdf import CASTER_LINKS, WHEEL_JOINTS, robot_urdf
+from puzzlebot_sim import coupling
+from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
+from puzzlebot_sim.params import AnchorParams, WorldParams
+from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
+                                robot_urdf)
+from puzzlebot_sim.worlds import WORLDS
+
+#: Collision groups: terrain, robot bodies, wheels and casters (terrain only), anchors.
+GROUP_TERRAIN, GROUP_BODY, GROUP_WHEEL, GROUP_ANCHOR = 1, 2, 4, 8
+_MASKS = {GROUP_TERRAIN: GROUP_TERRAIN | GROUP_BODY | GROUP_WHEEL | GROUP_ANCHOR,
+          GROUP_BODY: GROUP_TERRAIN | GROUP_BODY | GROUP_ANCHOR,
+          GROUP_WHEEL: GROUP_TERRAIN,
+          GROUP_ANCHOR: GROUP_TERRAIN | GROUP_BODY | GROUP_ANCHOR}
+
+#: An anchor's joint motors are re-set when a joint moved by more than this [rad].
+ANCHOR_UPDATE_RAD = 0.002
+
+#: Tolerances of the start-pose check for robots placed coupled [m, rad].
+MATE_POSITION_TOLERANCE = 0.001
+MATE_YAW_TOLERANCE = 0.03
 
 
 @dataclass
@@ -30,50 +62,98 @@ class RobotStart:
     pilot: bool = False
 
 
-def _flat(client, urdf_dir):
-    plane = pb.loadURDF(os.path.join(pybullet_data.getDataPath(), "plane.urdf"), physicsClientId=client)
-    pb.changeDynamics(plane, -1, lateralFriction=1.0, physicsClientId=client)
-    return [plane]
+@dataclass(frozen=True)
+class MocapModel:
+    """Measurement effects on published poses (all off by default)."""
+
+    position_std: float = 0.0    # m, Gaussian noise on x and y
+    yaw_std: float = 0.0         # rad, Gaussian noise on yaw
+    dropout: float = 0.0         # probability that a measurement is lost
+    heading_offset: float = 0.0  # rad, marker-frame yaw minus body yaw
+
+    @classmethod
+    def from_sim(cls, sim):
+        return cls(sim.mocap_position_std, sim.mocap_yaw_std, sim.mocap_dropout, sim.mocap_heading_offset)
 
 
-#: World builders by name; each returns the static body ids it created.
-WORLDS = {"flat": _flat}
+# ------------------------------------------------------------- start checks
+def _rect_corners(pose, x0, x1, y0, y1):
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return np.array([[pose[0] + c * x - s * y, pose[1] + s * x + c * y]
+                     for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))])
 
 
-def check_start_poses(starts, body_side):
-    """Raise ConfigError if two robots' square bodies would overlap at start."""
-    for a in range(len(starts)):
-        for b in range(a + 1, len(starts)):
-            p, q = starts[a], starts[b]
-            if _squares_overlap((p.x, p.y, p.yaw), (q.x, q.y, q.yaw), body_side):
-                raise ConfigError("robots %s and %s are placed inside each other: centres %.1f mm apart, "
-                                  "bodies are %.0f mm wide" % (p.name, q.name,
-                                                               1e3 * math.hypot(p.x - q.x, p.y - q.y),
-                                                               1e3 * body_side))
-
-
-def _squares_overlap(pa, pb_, side):
-    """Separating-axis test of two squares of side ``side`` at planar poses."""
-    def corners(pose):
-        h = side / 2.0
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        return np.array([[pose[0] + c * x - s * y, pose[1] + s * x + c * y]
-                         for x, y in ((-h, -h), (h, -h), (h, h), (-h, h))])
-
-    ca, cb = corners(pa), corners(pb_)
-    for pose in (pa, pb_):
-        for ang in (pose[2], pose[2] + math.pi / 2):
-            axis = np.array([math.cos(ang), math.sin(ang)])
+def _convex_overlap(ca, cb):
+    """Separating-axis test of two convex quadrilaterals (corner arrays)."""
+    for poly in (ca, cb):
+        for k in range(len(poly)):
+            e = poly[(k + 1) % len(poly)] - poly[k]
+            axis = np.array([-e[1], e[0]])
             a, b = ca @ axis, cb @ axis
             if a.max() <= b.min() + 1e-9 or b.max() <= a.min() + 1e-9:
                 return False
     return True
 
 
-class SimWorld:
-    """PuzzleBots in a Bullet world. Commands are body velocities (v, w)."""
+def _squares_overlap(pa, pb_, side):
+    h = side / 2.0
+    return _convex_overlap(_rect_corners(pa, -h, h, -h, h), _rect_corners(pb_, -h, h, -h, h))
 
-    def __init__(self, robot_params, starts, world="flat", physics_rate=400, gui=False):
+
+def mated(anchor_pose, opening_pose, body_side):
+    """True when the opening robot sits right behind the anchor robot, facing the
+    same way (back face on front face): the anchor then starts seated."""
+    dx, dy = opening_pose[0] - anchor_pose[0], opening_pose[1] - anchor_pose[1]
+    c, s = math.cos(anchor_pose[2]), math.sin(anchor_pose[2])
+    along, across = c * dx + s * dy, -s * dx + c * dy
+    return (abs(along + body_side) <= MATE_POSITION_TOLERANCE and abs(across) <= MATE_POSITION_TOLERANCE
+            and abs(wrap_angle(opening_pose[2] - anchor_pose[2])) <= MATE_YAW_TOLERANCE)
+
+
+def check_start_poses(starts, body_side, anchor_reach=0.0, anchor_half_width=0.0):
+    """Raise ConfigError if robots (or an anchor and a robot) would start inside each other.
+
+    ``anchor_reach``: how far the anchor sticks out of the back face [m]
+    (0: no anchors). An anchor may start inside another robot only when that
+    robot is mated behind it (see :func:`mated`): then it starts seated.
+    """
+    h = body_side / 2.0
+    for a in range(len(starts)):
+        for b in range(len(starts)):
+            if a == b:
+                continue
+            p, q = starts[a], starts[b]
+            pa, qa = (p.x, p.y, p.yaw), (q.x, q.y, q.yaw)
+            if a < b and _squares_overlap(pa, qa, body_side):
+                raise ConfigError("robots %s and %s are placed inside each other: centres %.1f mm apart, "
+                                  "bodies are %.0f mm wide" % (p.name, q.name,
+                                                               1e3 * math.hypot(p.x - q.x, p.y - q.y),
+                                                               1e3 * body_side))
+            if anchor_reach > 0 and not mated(pa, qa, body_side):
+                anchor = _rect_corners(pa, -h - anchor_reach, -h, -anchor_half_width, anchor_half_width)
+                if _convex_overlap(anchor, _rect_corners(qa, -h, h, -h, h)):
+                    raise ConfigError("the anchor of robot %s would start inside robot %s: place %s clear of "
+                                      "%s's back (>= %.1f mm) or mated behind it (coupled start)"
+                                      % (p.name, q.name, q.name, p.name, 1e3 * anchor_reach))
+
+
+# -------------------------------------------------------------------- world
+class SimWorld:
+    """PuzzleBots (and their anchors) in a Bullet world. Commands are body velocities (v, w).
+
+    Arguments: ``robot_params`` (RobotParams), ``starts`` (RobotStart list),
+    ``world`` (name in puzzlebot_sim.worlds.WORLDS), ``physics_rate`` [Hz],
+    ``gui``; keyword-only: ``anchor_params`` (AnchorParams, None = robots
+    without anchors), ``world_params`` (WorldParams), ``solver_iterations``,
+    ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
+    puzzlebot_mpc.effects.ActuatorModel applied to every robot's commands,
+    None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
+    ``mocap`` (MocapModel).
+    """
+
+    def __init__(self, robot_params, starts, world="flat", physics_rate=200, gui=False, *,
+                 anchor_params=AnchorParams(), world_params=None, solver_iterations=15, erp=0.2, seed=0,
+                 actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel()):
         if world not in WORLDS:
             raise ConfigError("unknown world %r; known worlds: %s" % (world, ", ".join(sorted(WORLDS))))
         if not starts:
@@ -81,65 +161,214 @@ class SimWorld:
         names = [s.name for s in starts]
         if len(set(names)) != len(names):
             raise ConfigError("robot names must be unique, got %s" % names)
-        check_start_poses(starts, robot_params.body_side)
         self.params = robot_params
+        self.anchor_params = anchor_params
+        self.world_params = world_params or WorldParams()
+        if self.world_params.stage_height < robot_params.body_height and world != "flat":
+            raise ConfigError("world.stage_height (%g m) must be at least one robot height (%g m)"
+                              % (self.world_params.stage_height, robot_params.body_height))
+        self._anchor_geometry = None
+        reach = half_width = 0.0
+        if anchor_params is not None:
+            self._anchor_geometry = AnchorGeometry(anchor_params)
+            self._torque_map = BarbTorqueMap(anchor_params, robot_params.mouth_width, robot_params.lip_depth / 2)
+            anchor_params.check_fits(robot_params)
+            self._anchor_home_x = -robot_params.body_side / 2 + robot_params.holder_depth - anchor_params.base_radius
+            reach = -robot_params.body_side / 2 - (self._anchor_home_x - anchor_params.length)
+            reach = max(reach, 0.0)
+            half_width = self._anchor_geometry.half_width()
+        check_start_poses(starts, robot_params.body_side, reach, half_width)
+        self.world_name = world
         self.dt = 1.0 / physics_rate
         self.steps = 0
+        self.rng = np.random.default_rng(seed)
+        self.seed = seed
+        self.mocap = mocap
+        self.wheel_imbalance = wheel_imbalance
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         c = self.client
         pb.resetSimulation(physicsClientId=c)
         pb.setGravity(0, 0, -9.81, physicsClientId=c)
         pb.setTimeStep(self.dt, physicsClientId=c)
         pb.setRealTimeSimulation(0, physicsClientId=c)
+        pb.setPhysicsEngineParameter(numSolverIterations=solver_iterations, erp=erp, contactERP=erp,
+                                     frictionERP=erp, deterministicOverlappingPairs=1, enableConeFriction=0,
+                                     physicsClientId=c)
         self._tmp = tempfile.TemporaryDirectory(prefix="puzzlebot_urdf_")
-        self.static_bodies = WORLDS[world](c, self._tmp.name)
+        self.terrain = WORLDS[world](c, self.world_params)
+        self.static_bodies = self.terrain.bodies
+        for body in self.static_bodies:
+            self._set_group(body, -1, GROUP_TERRAIN)
+        self._urdf_paths = {}
         self.robots = {}
         self._cmd = {}
+        self._plants = {}
+        self._actuator_model = actuator_model
+        self._driven = {}
         for s in starts:
             self.robots[s.name] = self._spawn(s)
             self._cmd[s.name] = (0.0, 0.0)
+            self._plants[s.name] = self._make_plant()
+        self.names = names
 
     # ----------------------------------------------------------------- setup
+    def _make_plant(self):
+        if self._actuator_model is None:
+            return None
+        from puzzlebot_mpc.effects import ActuatorPlant
+
+        return ActuatorPlant(self._actuator_model)
+
+    def _set_group(self, body, link, group):
+        pb.setCollisionFilterGroupMask(body, link, group, _MASKS[group], physicsClientId=self.client)
+
+    def _urdf(self, kind, make_text):
+        """Path of this world's URDF of ``kind`` (written once; PyBullet caches files by path)."""
+        path = self._urdf_paths.get(kind)
+        if path is None:
+            path = os.path.join(self._tmp.name, "%s.urdf" % kind)
+            with open(path, "w") as f:
+                f.write(make_text())
+            self._urdf_paths[kind] = path
+        return path
+
     def _spawn(self, s):
         c, p = self.client, self.params
-        path = os.path.join(self._tmp.name, "%s.urdf" % s.name)
-        with open(path, "w") as f:
-            f.write(robot_urdf(p, name=s.name, pilot=s.pilot))
-        body = pb.loadURDF(path, [s.x, s.y, p.body_centre_height + 1e-4],
-                           pb.getQuaternionFromEuler([0, 0, s.yaw]), physicsClientId=c)
-        joints = {}
-        links = {}
+        kind = "pilot" if s.pilot else "robot"
+        path = self._urdf(kind, lambda: robot_urdf(p, name=kind, pilot=s.pilot))
+        z0 = self.terrain.height(s.x, s.y)
+        orn = pb.getQuaternionFromEuler([0, 0, s.yaw])
+        body = pb.loadURDF(path, [s.x, s.y, z0 + p.body_centre_height + 1e-4], orn,
+                           flags=URDF_FLAGS, physicsClientId=c)
+        joints, links = {}, {}
         for j in range(pb.getNumJoints(body, physicsClientId=c)):
             info = pb.getJointInfo(body, j, physicsClientId=c)
             joints[info[1].decode()] = j
             links[info[12].decode()] = j
-        wheels = [joints[n] for n in WHEEL_JOINTS]
+        wheel_names = PILOT_WHEEL_JOINTS if s.pilot else WHEEL_JOINTS
+        wheels = [joints[n] for n in wheel_names]
+        # left wheels first, then right (pilot: front left, rear left, front right, rear right)
+        n_left = len(wheels) // 2
+        pb.changeDynamics(body, -1, lateralFriction=p.body_friction, physicsClientId=c)
+        self._set_group(body, -1, GROUP_BODY)
         for j in wheels:
             pb.changeDynamics(body, j, lateralFriction=p.wheel_friction, physicsClientId=c)
+            self._set_group(body, j, GROUP_WHEEL)
         for name in CASTER_LINKS:
-            pb.changeDynamics(body, links[name], lateralFriction=0.0, spinningFriction=0.0,
-                              rollingFriction=0.0, physicsClientId=c)
-        return {"body": body, "wheels": wheels}
+            if name in links:
+                pb.changeDynamics(body, links[name], lateralFriction=0.0, spinningFriction=0.0,
+                                  rollingFriction=0.0, physicsClientId=c)
+                self._set_group(body, links[name], GROUP_WHEEL)
+        robot = {"body": body, "wheels": wheels, "n_left": n_left, "pilot": s.pilot, "anchor": None,
+                 "wheel_targets": None, "anchor_q": None}
+        if self.anchor_params is not None:
+            robot["anchor"] = self._spawn_anchor(s, z0)
+        return robot
+
+    def _spawn_anchor(self, s, z0):
+        c, p, a = self.client, self.params, self.anchor_params
+        path = self._urdf("anchor", lambda: anchor_urdf(a))
+        cy, sy = math.cos(s.yaw), math.sin(s.yaw)
+        x = s.x + cy * self._anchor_home_x
+        y = s.y + sy * self._anchor_home_x
+        z = z0 + p.body_centre_height + p.opening_z + 1e-4
+        body = pb.loadURDF(path, [x, y, z], pb.getQuaternionFromEuler([0, 0, s.yaw]),
+                           flags=URDF_FLAGS, physicsClientId=c)
+        for link in range(-1, pb.getNumJoints(body, physicsClientId=c)):
+            pb.changeDynamics(body, link, lateralFriction=a.barb_friction if link > 0 else a.friction,
+                              physicsClientId=c)
+            self._set_group(body, link, GROUP_ANCHOR)
+        pb.changeDynamics(body, 0, lateralFriction=a.head_friction, physicsClientId=c)
+        for j in range(pb.getNumJoints(body, physicsClientId=c)):
+            pb.setJointMotorControl2(body, j, pb.VELOCITY_CONTROL, force=0, physicsClientId=c)
+        return body
+
+    def reset_anchor(self, name, yaw=0.0):
+        """Put ``name``'s anchor back in its holder (pushed in, barbs at rest), turned by
+        ``yaw`` [rad] relative to the robot (experiments: the anchor's free yaw)."""
+        c, body = self.client, self.robots[name]["anchor"]
+        if body is None:
+            return
+        rx, ry, ryaw = self.pose2d(name)
+        z = self.pose(name)[0][2] + self.params.opening_z
+        x = rx + math.cos(ryaw) * self._anchor_home_x
+        y = ry + math.sin(ryaw) * self._anchor_home_x
+        pb.resetBasePositionAndOrientation(body, [x, y, z], pb.getQuaternionFromEuler([0, 0, ryaw + yaw]),
+                                           physicsClientId=c)
+        pb.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=c)
+        for j in range(3):
+            pb.resetJointState(body, j, 0.0, 0.0, physicsClientId=c)
+        self.robots[name]["anchor_q"] = None
 
     # --------------------------------------------------------------- control
     def set_command(self, name, v, w):
-        """Body velocity command (m/s, rad/s) applied from the next step on."""
+        """Body velocity command (m/s, rad/s) from now on (through the actuator effects, if any)."""
         if name not in self._cmd:
             raise KeyError("unknown robot %r" % name)
-        self._cmd[name] = (float(v), float(w))
+        v, w = float(v), float(w)
+        self._cmd[name] = (v, w)
+        plant = self._plants[name]
+        if plant is not None:
+            plant.command(self.time, v, w)
 
-    def step(self):
-        """Advance the world by one fixed step of ``dt`` seconds."""
-        c, p = self.client, self.params
+    def driven_velocity(self, name):
+        """The body velocity the wheels are driven at now (after the actuator effects)."""
+        return self._driven.get(name, (0.0, 0.0))
+
+    def step(self, n=1):
+        """Advance the world by ``n`` fixed steps of ``dt`` seconds."""
+        for _ in range(n):
+            self._apply_controls()
+            pb.stepSimulation(physicsClientId=self.client)
+            self.steps += 1
+
+    def run(self, seconds):
+        """Advance by ``seconds`` of simulated time (rounded to whole steps)."""
+        self.step(int(round(seconds / self.dt)))
+
+    def _apply_controls(self):
+        c, p, t = self.client, self.params, self.time
+        k = self.wheel_imbalance
+        w_max, radius, torque = p.wheel_max_speed, p.wheel_radius, p.wheel_max_torque
         for name, robot in self.robots.items():
-            v, w = self._cmd[name]
+            plant = self._plants[name]
+            v, w = plant.advance(t, self.dt) if plant is not None else self._cmd[name]
+            self._driven[name] = (v, w)
             vl, vr = wheel_speeds(v, w, p.wheel_base)
-            for joint, rim in zip(robot["wheels"], (vl, vr)):
-                omega = max(-p.wheel_max_speed, min(p.wheel_max_speed, rim / p.wheel_radius))
-                pb.setJointMotorControl2(robot["body"], joint, pb.VELOCITY_CONTROL, targetVelocity=omega,
-                                         force=p.wheel_max_torque, physicsClientId=c)
-        pb.stepSimulation(physicsClientId=c)
-        self.steps += 1
+            wl = max(-w_max, min(w_max, (1.0 - k) * vl / radius))
+            wr = max(-w_max, min(w_max, (1.0 + k) * vr / radius))
+            if (wl, wr) != robot["wheel_targets"]:        # Bullet keeps motor settings between steps
+                robot["wheel_targets"] = (wl, wr)
+                n_left = robot["n_left"]
+                targets = [wl] * n_left + [wr] * (len(robot["wheels"]) - n_left)
+                pb.setJointMotorControlArray(robot["body"], robot["wheels"], pb.VELOCITY_CONTROL,
+                                             targetVelocities=targets, forces=[torque] * len(targets),
+                                             physicsClientId=c)
+        if self.anchor_params is not None:
+            self._apply_anchor_torques()
+
+    def _apply_anchor_torques(self):
+        """Barb torque limits from the profile at the current angles (see puzzlebot_sim.anchor).
+
+        An anchor's motors are re-set only when a joint moved by more than
+        ANCHOR_UPDATE_RAD since the last setting (the limits change slowly
+        with the angle); a resting anchor costs one state read per step.
+        """
+        c, a, tmap = self.client, self.anchor_params, self._torque_map
+        joints = [0, 1, 2]
+        for robot in self.robots.values():
+            body = robot["anchor"]
+            states = pb.getJointStates(body, joints, physicsClientId=c)
+            q = (states[0][0], states[1][0], states[2][0])
+            last = robot["anchor_q"]
+            if last is not None and max(abs(q[0] - last[0]), abs(q[1] - last[1]), abs(q[2] - last[2])) \
+                    < ANCHOR_UPDATE_RAD:
+                continue
+            robot["anchor_q"] = q
+            pb.setJointMotorControlArray(
+                body, joints, pb.VELOCITY_CONTROL,
+                targetVelocities=[-a.neck_servo_rate * q[0], -a.barb_servo_rate * q[1], -a.barb_servo_rate * q[2]],
+                forces=[a.neck_max_torque, tmap.torque_at(q[1]), tmap.torque_at(q[2])], physicsClientId=c)
 
     @property
     def time(self):
@@ -149,14 +378,117 @@ class SimWorld:
     # ------------------------------------------------------------- readouts
     def pose(self, name):
         """(position xyz [m], quaternion xyzw) of the robot's base_link in the world."""
-        pos, orn = pb.getBasePositionAndOrientation(self.robots[name]["body"], physicsClientId=self.client)
-        return pos, orn
+        return pb.getBasePositionAndOrientation(self.robots[name]["body"], physicsClientId=self.client)
 
     def pose2d(self, name):
         """Planar pose (x, y, yaw) of the robot [m, m, rad]."""
         pos, orn = self.pose(name)
-        yaw = pb.getEulerFromQuaternion(orn, physicsClientId=self.client)[2]
-        return (pos[0], pos[1], yaw)
+        return (pos[0], pos[1], yaw_from_quaternion(*orn))
+
+    def velocity(self, name):
+        """Actual body velocity (v forward [m/s], w yaw rate [rad/s]) of the robot."""
+        lin, ang = pb.getBaseVelocity(self.robots[name]["body"], physicsClientId=self.client)
+        yaw = self.pose2d(name)[2]
+        return (math.cos(yaw) * lin[0] + math.sin(yaw) * lin[1], ang[2])
+
+    def anchor_pose(self, name):
+        """(position xyz, quaternion xyzw) of the robot's anchor base, or None without anchors."""
+        body = self.robots[name]["anchor"]
+        if body is None:
+            return None
+        return pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
+
+    def anchor_pose2d(self, name):
+        pose = self.anchor_pose(name)
+        if pose is None:
+            return None
+        pos, orn = pose
+        return (pos[0], pos[1], yaw_from_quaternion(*orn))
+
+    def anchor_joints(self, name):
+        """(neck, left barb, right barb) joint angles [rad]; barb 0 = rest, > 0 flared, < 0 folded."""
+        body = self.robots[name]["anchor"]
+        states = pb.getJointStates(body, [0, 1, 2], physicsClientId=self.client)
+        return tuple(s[0] for s in states)
+
+    def anchor_points(self, name):
+        """World positions of the anchor's head tip and its two barb tips (centres)."""
+        body, a = self.robots[name]["anchor"], self.anchor_params
+        states = pb.getLinkStates(body, [0, 1, 2], physicsClientId=self.client)
+        head_pos, head_orn = states[0][4], states[0][5]
+        head_tip = pb.multiplyTransforms(head_pos, head_orn, [-(a.length - a.neck_x), 0, 0], [0, 0, 0, 1],
+                                         physicsClientId=self.client)[0]
+        tips = [pb.multiplyTransforms(st[4], st[5], [a.barb_length, 0, 0], [0, 0, 0, 1],
+                                      physicsClientId=self.client)[0] for st in states[1:]]
+        return head_tip, tips
+
+    def physical_pairs(self, include_decoupled=False):
+        """Anchor-opening pairs read off the simulated bodies (see puzzlebot_sim.coupling).
+
+        Returns PhysicalPair(anchor_robot, opening_robot, status) for every
+        anchor whose head is in another robot's opening (sorted by names);
+        with ``include_decoupled`` also the near pairs that are not.
+        """
+        if self.anchor_params is None:
+            return []
+        c, p = self.client, self.params
+        reach = p.body_side * 1.5 + self.anchor_params.length
+        poses = {n: self.pose(n) for n in self.names}
+        out = []
+        for a_name in self.names:
+            pa = poses[a_name][0]
+            points = None
+            for o_name in self.names:
+                if o_name == a_name:
+                    continue
+                po, oo = poses[o_name]
+                if (pa[0] - po[0]) ** 2 + (pa[1] - po[1]) ** 2 + (pa[2] - po[2]) ** 2 > reach * reach:
+                    continue
+                if points is None:
+                    head, tips = self.anchor_points(a_name)
+                    points = [head] + tips
+                inv_pos, inv_orn = pb.invertTransform(po, oo, physicsClientId=c)
+                local = [pb.multiplyTransforms(inv_pos, inv_orn, q, [0, 0, 0, 1], physicsClientId=c)[0]
+                         for q in points]
+                status = coupling.classify(local[0], local[1:], p)
+                if status != coupling.DECOUPLED or include_decoupled:
+                    out.append(coupling.PhysicalPair(a_name, o_name, status))
+        return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
+
+    def measure(self, name):
+        """Mocap measurement of the robot: (position xyz, quaternion xyzw), or None if dropped.
+
+        Applies the mocap model (noise, dropout, heading offset) and the
+        actuator model's heading offset; draws from this world's seeded RNG.
+        """
+        m = self.mocap
+        if m.dropout > 0.0 and self.rng.random() < m.dropout:
+            return None
+        pos, orn = self.pose(name)
+        plant = self._plants[name]
+        offset = m.heading_offset + (plant.offset if plant is not None else 0.0)
+        if offset == 0.0 and m.position_std == 0.0 and m.yaw_std == 0.0:
+            return pos, orn
+        x, y, z = pos
+        if m.position_std > 0.0:
+            dx, dy = self.rng.normal(0.0, m.position_std, 2)
+            x, y = x + dx, y + dy
+        dyaw = offset + (self.rng.normal(0.0, m.yaw_std) if m.yaw_std > 0.0 else 0.0)
+        rot = pb.getQuaternionFromEuler([0, 0, dyaw])
+        orn = pb.multiplyTransforms([0, 0, 0], rot, [0, 0, 0], orn, physicsClientId=self.client)[1]
+        return (x, y, z), orn
+
+    # ------------------------------------------------------------ lifecycle
+    @classmethod
+    def from_params(cls, sim, robot_params, starts, anchor_params=AnchorParams(), world_params=None,
+                    actuator_model=None, gui=None):
+        """A world configured from the sim node's parameter sets (SimParams, ...)."""
+        return cls(robot_params, starts, world=sim.world, physics_rate=sim.physics_rate,
+                   gui=sim.gui if gui is None else gui,
+                   anchor_params=anchor_params if sim.anchors else None, world_params=world_params,
+                   solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed,
+                   actuator_model=actuator_model, wheel_imbalance=sim.wheel_imbalance,
+                   mocap=MocapModel.from_sim(sim))
 
     def close(self):
         if self.client is not None and pb.isConnected(physicsClientId=self.client):
@@ -169,3 +501,4 @@ class SimWorld:
 
     def __exit__(self, *exc):
         self.close()
+

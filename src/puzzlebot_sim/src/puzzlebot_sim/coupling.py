@@ -1,0 +1,62 @@
+"""Physical coupling: which anchor sits in which opening, from the simulated bodies.
+
+The status of an anchor-opening pair is read off the anchor linkage's actual
+pose in the opening robot's frame (not off the robots' poses, as the MPC's
+polygon model does):
+
+* ``HEAD_INSERTED``: both barb tips are seated in the slits: behind the lips,
+  outside the mouth, inside the slit width and height;
+* ``HEAD_ALIGNED``: the head tip is inside the opening (behind the front
+  face, within the slit width and height) but the tips are not both seated;
+* ``DECOUPLED`` otherwise.
+
+The numeric values match puzzlebot_msgs/ConnectionPair's STATUS_* constants.
+"""
+
+from dataclasses import dataclass
+
+DECOUPLED = 0
+HEAD_ALIGNED = 1
+HEAD_INSERTED = 2
+
+STATUS_NAMES = {DECOUPLED: "decoupled", HEAD_ALIGNED: "head_aligned", HEAD_INSERTED: "head_inserted"}
+
+
+@dataclass(frozen=True)
+class PhysicalPair:
+    """An anchor in an opening: ``anchor_robot``'s anchor in ``opening_robot``'s front opening."""
+
+    anchor_robot: str
+    opening_robot: str
+    status: int
+
+    @property
+    def status_name(self):
+        return STATUS_NAMES[self.status]
+
+
+def _in_opening(p, rp, tolerance):
+    """True when point ``p`` (opening robot's base_link) is inside the mouth/slit cavity
+    (or up in the lock slot above it)."""
+    h = rp.body_side / 2.0
+    if not (h - rp.cavity_depth - tolerance <= p[0] < h and abs(p[1]) <= rp.slit_width / 2.0 + tolerance):
+        return False
+    dz = p[2] - rp.opening_z
+    top = rp.mouth_height / 2.0
+    if p[0] <= h - rp.lip_depth - rp.lock_sill and abs(p[1]) <= rp.lock_width / 2.0:
+        top += rp.lock_height
+    return -rp.mouth_height / 2.0 - tolerance <= dz <= top + tolerance
+
+
+def classify(head_tip, barb_tips, rp, tolerance=0.0005):
+    """Status of an anchor whose head tip and barb tip centres are given in the
+    opening robot's base_link (x, y, z) [m]; ``rp``: that robot's RobotParams.
+
+    ``tolerance`` [m] absorbs contact penetration and the tips' rounding.
+    """
+    if not _in_opening(head_tip, rp, tolerance):
+        return DECOUPLED
+    behind_lips = rp.body_side / 2.0 - rp.lip_depth + tolerance
+    seated = all(_in_opening(t, rp, tolerance) and t[0] < behind_lips
+                 and abs(t[1]) >= rp.mouth_width / 2.0 - tolerance for t in barb_tips)
+    return HEAD_INSERTED if seated else HEAD_ALIGNED

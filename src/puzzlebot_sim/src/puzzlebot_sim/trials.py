@@ -1,0 +1,230 @@
+"""Seeded anchor experiments and the speed benchmark, ROS-free.
+
+Each trial builds its own :class:`SimWorld`, drives it with scripted body
+velocities and reads the physical coupling off the simulated anchor (see
+puzzlebot_sim.coupling); it returns a plain dict, so trials can run in
+parallel processes and the scripts only print them. The seed decides the
+small start perturbations listed with each trial; the physics itself is
+deterministic.
+
+Robot names: ``a`` carries the anchor that goes into the front opening of
+``o`` (``o`` behind ``a``, both facing +x); chains are ``r1`` (front) .. ``rN``.
+"""
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
+from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.world import RobotStart, SimWorld
+
+#: Control period of the scripted drivers [s] (the MPC's rate).
+CONTROL_DT = 0.05
+#: Gap left between mated robots at a coupled start [m] (start-pose tolerance is 1 mm).
+MATE_GAP = 0.0003
+
+
+def _world(starts, sim, robot, anchor, world="flat", world_params=None):
+    return SimWorld(robot, starts, world=world, physics_rate=sim.physics_rate, anchor_params=anchor,
+                    world_params=world_params, solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed)
+
+
+def _status(w, anchor_robot, opening_robot):
+    for p in w.physical_pairs():
+        if p.anchor_robot == anchor_robot and p.opening_robot == opening_robot:
+            return p.status
+    return DECOUPLED
+
+
+def _mated_pair(rng, robot, lateral=0.0003, yaw=0.01):
+    """Starts for a coupled pair: o right behind a, perturbed by the seed."""
+    dy, dyaw = rng.uniform(-lateral, lateral), rng.uniform(-yaw, yaw)
+    return [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(robot.body_side + MATE_GAP), dy, dyaw)]
+
+
+def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, yaw=0.02, anchor_yaw=0.3,
+                   timeout=5.0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+    """One robot drives at ``speed`` into the other's opening from an aligned start.
+
+    ``driver``: "anchor" (a backs its anchor into o's opening) or "opening"
+    (o drives forward onto a's anchor); the other robot is commanded to stand
+    still. Seeded perturbations: o's lateral offset (+/- ``lateral`` m) and yaw
+    (+/- ``yaw`` rad), the anchor's free yaw in its holder (+/- ``anchor_yaw``).
+    Success: the anchor's tips seated in the slits (HEAD_INSERTED) within ``timeout``.
+    """
+    rng = np.random.default_rng(seed)
+    dy, dyaw = rng.uniform(-lateral, lateral), rng.uniform(-yaw, yaw)
+    starts = [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(robot.body_side + gap), dy, dyaw)]
+    with _world(starts, sim, robot, anchor) as w:
+        w.reset_anchor("a", rng.uniform(-anchor_yaw, anchor_yaw))
+        w.run(0.2)
+        w.set_command("a", -speed, 0.0) if driver == "anchor" else w.set_command("o", speed, 0.0)
+        t0 = w.time
+        while w.time - t0 < timeout:
+            w.run(CONTROL_DT)
+            if _status(w, "a", "o") == HEAD_INSERTED:
+                return {"trial": "couple", "seed": seed, "driver": driver, "speed": speed, "success": True,
+                        "time_s": round(w.time - t0, 3)}
+        return {"trial": "couple", "seed": seed, "driver": driver, "speed": speed, "success": False,
+                "time_s": None, "status": _status(w, "a", "o")}
+
+
+def pullout_trial(seed, driver="opening", speed=0.05, duration=5.0, sim=SimParams(), robot=RobotParams(),
+                  anchor=AnchorParams()):
+    """Start coupled; one robot drives straight away from the other for ``duration``.
+
+    ``driver``: "opening" (o backs away) or "anchor" (a drives forward); the
+    other is commanded to stand still. Success: never decoupled. Also reports
+    the largest barb flare (joint angle, rad) and the snap angle.
+    """
+    rng = np.random.default_rng(seed)
+    with _world(_mated_pair(rng, robot), sim, robot, anchor) as w:
+        w.run(0.2)
+        w.set_command("o", -speed, 0.0) if driver == "opening" else w.set_command("a", speed, 0.0)
+        t0, flare, lost = w.time, 0.0, None
+        while w.time - t0 < duration:
+            w.run(CONTROL_DT)
+            flare = max(flare, *w.anchor_joints("a")[1:])
+            if lost is None and _status(w, "a", "o") == DECOUPLED:
+                lost = round(w.time - t0, 3)
+        snap = w._torque_map.snap_angle - anchor.barb_angle
+        return {"trial": "pullout", "seed": seed, "driver": driver, "speed": speed, "success": lost is None,
+                "decoupled_at_s": lost, "max_flare_rad": round(flare, 3), "snap_rad": round(snap, 3)}
+
+
+def wiggle_trial(seed, v_bias=0.02, w_max=3.0, period=2.0, timeout=20.0, sim=SimParams(), robot=RobotParams(),
+                 anchor=AnchorParams()):
+    """Start coupled; the anchor robot wiggles (v = v_bias, w = w_max sin(B t), B = 2 pi / period).
+
+    Seeded perturbations: the mated start and the sign of the first turn.
+    Success: decoupled within ``timeout``; reports the time.
+    """
+    rng = np.random.default_rng(seed)
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    b = 2.0 * math.pi / period
+    with _world(_mated_pair(rng, robot), sim, robot, anchor) as w:
+        w.run(0.2)
+        t0 = w.time
+        while w.time - t0 < timeout:
+            w.set_command("a", v_bias, sign * w_max * math.sin(b * (w.time - t0)))
+            w.run(CONTROL_DT)
+            if _status(w, "a", "o") == DECOUPLED:
+                return {"trial": "wiggle", "seed": seed, "success": True, "time_s": round(w.time - t0, 3)}
+        return {"trial": "wiggle", "seed": seed, "success": False, "time_s": None}
+
+
+def _drive_chain_off_edge(w, names, speed, edge_x, body_side, hold_s):
+    """All robots drive forward; each stops when its front reaches the edge (the
+    ones that went over keep driving). Returns after ``hold_s`` s more."""
+    for n in names:
+        w.set_command(n, speed, 0.0)
+    t_end = None
+    while True:
+        w.run(CONTROL_DT)
+        last = names[-1]
+        if t_end is None and w.pose2d(last)[0] + body_side / 2 >= edge_x - 0.004:
+            for n in names:
+                w.set_command(n, 0.0, 0.0)
+            t_end = w.time
+        if t_end is not None and w.time - t_end >= hold_s:
+            return
+
+
+def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, sim=SimParams(), robot=RobotParams(),
+                    anchor=AnchorParams()):
+    """A coupled pair on a stage drives forward until the front (anchor) robot
+    goes over the edge; the back robot stops at the edge.
+
+    Success: after ``hold_s`` s the front robot is below the stage top, the back
+    robot is still on the stage and the anchor is still in its opening.
+    Seeded perturbation: the mated start.
+    """
+    rng = np.random.default_rng(seed)
+    wp = WorldParams(stage_height=stage_height)
+    starts = [replace(s, x=s.x - 0.03) for s in _mated_pair(rng, robot)]
+    with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
+        w.run(0.2)
+        _drive_chain_off_edge(w, ["a", "o"], speed, wp.edge_x, robot.body_side, hold_s)
+        za, zo = w.pose("a")[0][2], w.pose("o")[0][2]
+        status = _status(w, "a", "o")
+        return {"trial": "edge_lock", "seed": seed, "stage_height": stage_height,
+                "success": bool(za < stage_height and zo > stage_height and status != DECOUPLED),
+                "front_z_mm": round(1e3 * za, 1), "back_z_mm": round(1e3 * zo, 1), "status": status}
+
+
+def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=20.0, sim=SimParams(),
+                     robot=RobotParams(), anchor=AnchorParams()):
+    """A chain of ``n`` coupled robots drives forward off the stage edge onto the floor.
+
+    Success: every robot ends on the floor (body centre below the stage top)
+    within ``timeout``. Reports how many pairs are still coupled at the end.
+    Seeded perturbation: small lateral/yaw offsets of each follower.
+    """
+    rng = np.random.default_rng(seed)
+    names = ["r%d" % (i + 1) for i in range(n)]
+    starts, x = [], -0.03
+    for i, name in enumerate(names):
+        dy = rng.uniform(-0.0003, 0.0003) if i else 0.0
+        starts.append(RobotStart(name, x, dy, 0.0))
+        x -= robot.body_side + MATE_GAP
+    wp = WorldParams(stage_height=stage_height)
+    with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
+        w.run(0.2)
+        for name in names:
+            w.set_command(name, speed, 0.0)
+        t0 = w.time
+        while w.time - t0 < timeout:
+            w.run(CONTROL_DT)
+            if all(w.pose(nm)[0][2] < stage_height for nm in names):
+                break
+        down = [w.pose(nm)[0][2] < stage_height for nm in names]
+        coupled = sum(_status(w, names[i], names[i + 1]) != DECOUPLED for i in range(n - 1))
+        return {"trial": "chain_step", "seed": seed, "robots": n, "success": all(down),
+                "on_floor": sum(down), "pairs_still_coupled": coupled,
+                "time_s": round(w.time - t0, 2) if all(down) else None}
+
+
+def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+    """Wall-clock speed of a headless world of ``robots`` robots with anchors.
+
+    Layout on a grid 0.2 m apart: half of the robots (rounded up to a pair)
+    stand in coupled pairs, the others alone; every robot drives (v = 0.03
+    m/s, gentle seeded turns), so every anchor rides in its holder and the
+    coupled ones carry load. Returns robots, sim_seconds, wall_seconds,
+    real_time_factor (sim / wall) and cpu_seconds.
+    """
+    rng = np.random.default_rng(seed)
+    coupled = min(robots, 2 * int(math.ceil(robots / 4.0)))
+    cells = coupled // 2 + (robots - coupled)
+    cols = max(1, int(math.ceil(math.sqrt(cells))))
+    starts = []
+    for k in range(cells):
+        cx, cy = 0.2 * (k % cols), 0.2 * (k // cols)
+        starts.append(RobotStart("r%d" % len(starts), cx, cy, 0.0))
+        if k < coupled // 2:
+            starts.append(RobotStart("r%d" % len(starts), cx - robot.body_side - MATE_GAP, cy, 0.0))
+    w = _world(starts, replace(sim, seed=seed), robot, anchor)
+    try:
+        turns = {s.name: rng.uniform(-0.3, 0.3) for s in starts}
+        for s in starts:
+            w.set_command(s.name, 0.03, turns[s.name])
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        w.run(sim_seconds)
+        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+        pairs = len(w.physical_pairs())
+    finally:
+        w.close()
+    return {"robots": robots, "sim_seconds": sim_seconds, "wall_seconds": round(wall, 4),
+            "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 4),
+            "coupled_pairs_at_end": pairs}
+
+
+def summarize(results):
+    """Success count, rate and mean time of a list of trial dicts."""
+    ok = [r for r in results if r["success"]]
+    times = [r["time_s"] for r in ok if r.get("time_s") is not None]
+    return {"trials": len(results), "successes": len(ok), "rate": len(ok) / len(results) if results else 0.0,
+            "mean_time_s": round(float(np.mean(times)), 3) if times else None}

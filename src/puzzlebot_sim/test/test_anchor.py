@@ -1,0 +1,70 @@
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
+from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify
+from puzzlebot_sim.params import AnchorParams, RobotParams
+
+
+def tmap(a=AnchorParams(), p=RobotParams()):
+    return BarbTorqueMap(a, p.mouth_width, p.lip_depth / 2)
+
+
+def test_torque_law_is_asymmetric_and_snaps_at_the_end_of_the_profile():
+    a, m = AnchorParams(), tmap()
+    assert m.torque_at(0.0) == pytest.approx(a.barb_min_torque, rel=0.1)       # at rest: only the floor
+    # backward (flare): torque = F(d)/2 * b sin(phi); e.g. at d = 4 mm the anchor carries 0.6 N
+    phi = math.acos(math.cos(a.barb_angle) - 0.004 / a.barb_length)
+    tau = m.torque_at(phi - a.barb_angle)
+    assert tau == pytest.approx(0.5 * 0.60 * a.barb_length * math.sin(phi), rel=0.02)
+    assert m.backward_displacement(phi - a.barb_angle) == pytest.approx(0.004)
+    # past the profile's end (5 mm) the beam snaps through
+    assert m.snap_mm == pytest.approx(5.0, abs=0.05)
+    assert m.torque_at(m.snap_angle - a.barb_angle + 0.01) == a.barb_min_torque
+    # forward (fold) torque is bounded by the forward profile through the contact geometry; the
+    # tips pass the lips after the profile's 5 mm
+    assert m.forward_pass_mm > 5.0
+    assert np.all(np.diff(m.q) > 0)
+    assert m.max_torque(np.array([0.3, -0.2])) == pytest.approx([m.torque_at(0.3), m.torque_at(-0.2)])
+
+
+def test_tips_rest_on_the_lips_flat_face_and_fold_through_the_mouth():
+    a, p = AnchorParams(), RobotParams()
+    g = AnchorGeometry(a)
+    rest = g.tip_centre(a.barb_angle)[1]
+    assert rest > p.mouth_width / 2 + p.lip_depth / 2 + 0.0005          # on the flat face, not the rounded end
+    folded = g.tip_centre(a.barb_fold_limit)[1] + a.barb_tip_radius
+    assert folded < p.mouth_width / 2                                  # folded barbs pass the mouth
+    assert g.half_width() < p.slit_width / 2
+
+
+def test_stiffer_profile_gives_proportionally_larger_torques():
+    a = AnchorParams()
+    stiff = replace(a, backward_profile_n=tuple(2 * f for f in a.backward_profile_n))
+    q = 0.6
+    assert tmap(stiff).torque_at(q) == pytest.approx(2 * tmap(a).torque_at(q), rel=1e-6)
+
+
+def points(head, tips):
+    return np.array(head), [np.array(t) for t in tips]
+
+
+def test_classify_coupling_states():
+    p = RobotParams()
+    h = p.body_side / 2
+    z = p.opening_z
+    seated = ((h - 0.012, 0.0, z), [(h - 0.006, 0.006, z), (h - 0.006, -0.006, z)])
+    assert classify(*points(*seated), p) == HEAD_INSERTED
+    half_in = ((h - 0.005, 0.0, z), [(h + 0.001, 0.006, z), (h + 0.001, -0.006, z)])
+    assert classify(*points(*half_in), p) == HEAD_ALIGNED
+    one_out = ((h - 0.012, 0.0, z), [(h - 0.006, 0.002, z), (h - 0.006, -0.006, z)])  # tip in the mouth
+    assert classify(*points(*one_out), p) == HEAD_ALIGNED
+    outside = ((h + 0.003, 0.0, z), [(h + 0.01, 0.006, z), (h + 0.01, -0.006, z)])
+    assert classify(*points(*outside), p) == DECOUPLED
+    too_high = ((h - 0.012, 0.0, z + 0.02), [(h - 0.006, 0.006, z + 0.02), (h - 0.006, -0.006, z + 0.02)])
+    assert classify(*points(*too_high), p) == DECOUPLED
+    in_lock_slot = ((h - 0.012, 0.0, z + p.mouth_height / 2 + 0.003), seated[1])
+    assert classify(*points(*in_lock_slot), p) == HEAD_INSERTED

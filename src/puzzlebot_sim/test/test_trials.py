@@ -1,0 +1,46 @@
+"""Reduced versions of the acceptance experiments (scripts/anchor_trials runs the full ones)."""
+
+import json
+import subprocess
+import sys
+import os
+
+import pytest
+
+from puzzlebot_sim import trials as T
+
+SCRIPTS = os.path.join(os.path.dirname(__file__), "..", "scripts")
+
+
+@pytest.mark.parametrize("driver", ["anchor", "opening"])
+def test_driving_into_an_opening_couples(driver):
+    for seed in (0, 1):
+        r = T.coupling_trial(seed, driver=driver)
+        assert r["success"], r
+
+
+@pytest.mark.parametrize("driver", ["opening", "anchor"])
+def test_driving_straight_away_does_not_pull_the_anchor_out(driver):
+    r = T.pullout_trial(0, driver=driver, duration=3.0)
+    assert r["success"], r
+    assert 0.3 < r["max_flare_rad"] < r["snap_rad"]        # the barbs carry the pull, short of snapping
+
+
+def test_wiggle_releases_the_anchor():
+    r = T.wiggle_trial(0, timeout=10.0)
+    assert r["success"], r
+
+
+def test_speed_test_and_scripts_report_json(tmp_path):
+    out = subprocess.run([sys.executable, os.path.join(SCRIPTS, "speed_test"), "--robots", "2",
+                          "--sim-seconds", "0.5", "--json"], capture_output=True, text=True, check=True)
+    line = json.loads(out.stdout.strip().splitlines()[-1])
+    assert line["robots"] == 2 and line["sim_seconds"] == 0.5
+    assert line["real_time_factor"] == pytest.approx(0.5 / line["wall_seconds"], rel=0.05)
+    out = subprocess.run([sys.executable, os.path.join(SCRIPTS, "force_profile"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout)["forward_peak_n"] < 0.2
+    assert (tmp_path / "force_profile.csv").exists()
+    bad = subprocess.run([sys.executable, os.path.join(SCRIPTS, "force_profile"), "--out", str(tmp_path),
+                          "--robot", str(tmp_path / "missing.yaml")], capture_output=True, text=True)
+    assert bad.returncode == 2 and "no such file" in bad.stderr and "Traceback" not in bad.stderr
