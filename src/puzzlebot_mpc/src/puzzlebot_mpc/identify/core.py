@@ -5,7 +5,7 @@ from dataclasses import dataclass
 from typing import Dict, List
 
 from puzzlebot_mpc.effects import EFFECTS, NOMINAL, ActuatorModel
-from puzzlebot_mpc.identify import data, fit, residuals
+from puzzlebot_mpc.identify import data, engine, fit, residuals
 from puzzlebot_mpc.identify.settings import IdentifySettings
 
 PARAM_DIGITS = 6     # decimals of the parameters written to the report and model.yaml
@@ -58,6 +58,13 @@ def identify(path, settings=None, robots=None, progress=None):
     windows = [residuals.residual_windows(r, settings) for r in dataset.robots]
     nominal_an = residuals.analyse(dict(NOMINAL), dataset.robots, settings, windows)
     final_an = residuals.analyse(selection.params, dataset.robots, settings, windows)
+    if dataset.kind == "csv":
+        period = min(engine.median_period(r) for r in dataset.robots)
+        for an in (nominal_an, final_an):
+            if not an.white:
+                an.notes += (" Note: a CSV gives command times only to within a pose period (here +/-%.1f ms), "
+                             "which by itself can structure the yaw residual of fast turns; a bag has the exact "
+                             "command times." % (500.0 * period))
     per_robot = {}
     if len(dataset.robots) > 1:
         for i, r in enumerate(dataset.robots):

@@ -66,6 +66,7 @@ class Dataset:
     path: str
     robots: List[RobotData]
     t0: float          # absolute time [s] subtracted from every time
+    kind: str = "bag"  # "bag" or "csv"
 
     def robot_names(self):
         return [r.name for r in self.robots]
@@ -203,7 +204,7 @@ def read_bag(path, robots=None):
     return _dataset(path, out)
 
 
-def _dataset(path, items, unknown=None):
+def _dataset(path, items, unknown=None, kind="bag"):
     """items: (name, poses (t, _, x, y, yaw), commands (t, v, w)) with absolute times;
     unknown: name -> (k, 2) intervals of unknown command timing."""
     starts = [p[0, 0] for _, p, _ in items] + [c[0, 0] for _, _, c in items if c.shape[0]]
@@ -215,7 +216,7 @@ def _dataset(path, items, unknown=None):
         gaps = (unknown or {}).get(name, np.zeros((0, 2))) - t0
         robots.append(RobotData(name=name, t=p[:, 0] - t0, x=p[:, 2], y=p[:, 3], yaw=p[:, 4],
                                 cmd_t=c[:, 0] - t0, cmd_v=c[:, 1], cmd_w=c[:, 2], cmd_unknown=gaps))
-    return Dataset(path=path, robots=robots, t0=t0)
+    return Dataset(path=path, robots=robots, t0=t0, kind=kind)
 
 
 # ----------------------------------------------------------------------- csv
@@ -300,4 +301,4 @@ def read_csv(path, robots=None):
         poses = np.column_stack([t, t, a[:, 2], a[:, 3], a[:, 4]])
         items.append((name, poses, np.array(events, dtype=float).reshape(-1, 3)))
         unknown[name] = np.array(gaps, dtype=float).reshape(-1, 2)
-    return _dataset(path, items, unknown)
+    return _dataset(path, items, unknown, kind="csv")

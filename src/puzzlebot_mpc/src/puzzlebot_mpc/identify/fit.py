@@ -48,6 +48,7 @@ SCANS = {
 #: Deadband thresholds -> the command component they act on.
 THRESHOLDS = {"v_min": "cmd_v", "w_min": "cmd_w"}
 SCAN_POINTS = 24          # evaluations per level of the coarse-to-fine threshold scan
+FLAT_COST = 1e-9          # relative cost difference below which two thresholds fit equally well
 DIFF_STEP = 1e-4          # least-squares finite-difference step (relative, at least absolute 1e-4)
 WEIGHT_FLOOR = 1e-9       # lower bound of sigma_p [m] and sigma_y [rad]
 
@@ -127,15 +128,23 @@ class Problem:
 
     def _scan_threshold(self, params, key):
         """Coarse-to-fine scan: SCAN_POINTS candidates spread over the range, then the
-        range between the best one's neighbours, until every candidate in it was tried."""
+        range between the best one's neighbours, until every candidate in it was tried.
+        Neighbouring candidates that fit equally well (no window sees a command between
+        them) form one flat stretch: its middle is returned."""
         cands = self._thresholds[key]
         lo, hi = 0, cands.size - 1
         while True:
             idx = np.unique(np.round(np.linspace(lo, hi, min(SCAN_POINTS, hi - lo + 1))).astype(int))
-            costs = [self.cost(dict(params, **{key: float(cands[i])})) for i in idx]
+            costs = np.array([self.cost(dict(params, **{key: float(cands[i])})) for i in idx])
             b = int(np.argmin(costs))
             if idx.size == hi - lo + 1:
-                return float(cands[idx[b]])
+                flat = costs <= costs[b] + FLAT_COST * max(abs(costs[b]), 1.0)
+                a, e = b, b
+                while a > 0 and flat[a - 1]:
+                    a -= 1
+                while e < idx.size - 1 and flat[e + 1]:
+                    e += 1
+                return float(0.5 * (cands[idx[a]] + cands[idx[e]]))
             lo, hi = int(idx[max(b - 1, 0)]), int(idx[min(b + 1, idx.size - 1)])
 
     def _least_squares(self, params, keys):

@@ -4,7 +4,8 @@
 (c) correlation of the residuals with the commands before the window start
 (lagged commands) and during it (mean, change); (d) autocorrelation of the
 residuals with the white-noise bound; (e) the strongest correlations of the
-nominal residuals with the named regressors and what remains of them;
+nominal residuals with the named regressors, what remains of them, and the
+strongest correlations left with the identified model (red: significant);
 (f) the nominal along-track residual against the command change in the
 window, the signature of timing effects (delay, lag).
 """
@@ -17,7 +18,8 @@ from puzzlebot_mpc.identify import engine, residuals
 NOMINAL_STYLE = dict(color="0.6", lw=1.0)
 FIGSIZE = (13.0, 12.0)   # inches
 DPI = 90
-BARS = 10                # correlations shown in panel (e)
+BARS_NOMINAL = 7         # correlations shown in panel (e): strongest of the nominal residual ...
+BARS_FINAL = 4           # ... and of the identified model's residual
 
 
 def _validation_errors(result, params):
@@ -57,9 +59,9 @@ def plot(result, path):
         ax[0, 1].plot(t, 1e3 * ey_f, lw=1.0, color=line.get_color(), label="%s identified" % name)
         ax[0, 1].plot(t, 1e3 * ey_n, ls="--", lw=0.8, color=line.get_color(), alpha=0.45)
     h = result.settings.horizon_s
-    ax[0, 0].set(title="(a) validation: position error after %.1f s open loop (dashed: nominal)" % h,
+    ax[0, 0].set(title="(a) validation position error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
                  xlabel="window start [s]", ylabel="[mm]")
-    ax[0, 1].set(title="(b) validation: yaw error after %.1f s open loop (dashed: nominal)" % h,
+    ax[0, 1].set(title="(b) validation yaw error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
                  xlabel="window start [s]", ylabel="[mrad]")
     ax[0, 0].legend(fontsize=7)
 
@@ -72,7 +74,7 @@ def plot(result, path):
                       label="%s residual vs %s(ts - lag)" % (comp, cmd))
     for a in (fin_an.r_critical, -fin_an.r_critical):
         ax[1, 0].axhline(a, color="k", lw=0.6, ls=":")
-    ax[1, 0].set(title="(c) residual vs lagged command (dashed: nominal; dotted: significance)",
+    ax[1, 0].set(title="(c) residual vs command before the window\n(dashed: nominal, dotted: significance)",
                  xlabel="lag before window start [s]", ylabel="correlation r", ylim=(-1, 1))
     ax[1, 0].legend(fontsize=7)
 
@@ -87,23 +89,27 @@ def plot(result, path):
     bound = 1.96 / np.sqrt(n_per * max(len(fin_an.robots), 1))
     for a in (bound, -bound):
         ax[1, 1].axhline(a, color="k", lw=0.6, ls=":")
-    ax[1, 1].set(title="(d) residual autocorrelation (dashed: nominal; dotted: 95 %% white bound)",
+    ax[1, 1].set(title="(d) residual autocorrelation\n(dashed: nominal, dotted: 95 % bound of white noise)",
                  xlabel="lag [s]", ylabel="autocorrelation", ylim=(-1, 1))
     ax[1, 1].legend(fontsize=7)
 
-    # (e) strongest correlations, nominal vs identified
-    top = nom_an.correlations[:BARS]
-    final_r = {(d["residual"], d["regressor"]): d["r"] for d in fin_an.correlations}
-    labels = ["%s vs %s" % (d["residual"], d["regressor"]) for d in top]
-    y = np.arange(len(top))
-    ax[2, 0].barh(y + 0.2, [abs(d["r"]) for d in top], height=0.4, color="0.6", label="nominal")
-    ax[2, 0].barh(y - 0.2, [abs(final_r[(d["residual"], d["regressor"])]) for d in top], height=0.4,
-                  color="C0", label="identified")
+    # (e) strongest correlations: those of the nominal residual, then what is left
+    keys = [(d["residual"], d["regressor"]) for d in nom_an.correlations[:BARS_NOMINAL]]
+    keys += [(d["residual"], d["regressor"]) for d in fin_an.correlations
+             if (d["residual"], d["regressor"]) not in keys][:BARS_FINAL]
+    nom_r = {(d["residual"], d["regressor"]): d for d in nom_an.correlations}
+    fin_r = {(d["residual"], d["regressor"]): d for d in fin_an.correlations}
+    y = np.arange(len(keys))
+    ax[2, 0].barh(y + 0.2, [abs(nom_r[k]["r"]) for k in keys], height=0.4, color="0.6", label="nominal")
+    ax[2, 0].barh(y - 0.2, [abs(fin_r[k]["r"]) for k in keys], height=0.4,
+                  color=["C3" if fin_r[k]["significant"] else "C0" for k in keys],
+                  label="identified (red: significant)")
     ax[2, 0].axvline(fin_an.r_critical, color="k", lw=0.6, ls=":")
     ax[2, 0].set_yticks(y)
-    ax[2, 0].set_yticklabels(labels, fontsize=7)
+    ax[2, 0].set_yticklabels(["%s vs %s" % k for k in keys], fontsize=7)
     ax[2, 0].invert_yaxis()
-    ax[2, 0].set(title="(e) strongest residual correlations |r| (dotted: significance)", xlim=(0, 1))
+    ax[2, 0].set(title="(e) strongest residual correlations |r|, nominal and identified\n"
+                       "(dotted: significance for constant-variance noise)", xlim=(0, 1))
     ax[2, 0].legend(fontsize=7)
 
     # (f) the timing signature
@@ -111,7 +117,7 @@ def plot(result, path):
                                                                            "identified")):
         x = np.concatenate([rr.reg["v_cmd change in window"] for rr in an.robots])
         ax[2, 1].scatter(x, 1e3 * an.pooled("along"), label=label, **style)
-    ax[2, 1].set(title="(f) along-track residual vs command change in the window",
+    ax[2, 1].set(title="(f) along-track residual vs command change in the window\n(timing effects: delay, lag)",
                  xlabel="v_cmd change in window [m/s]", ylabel="along-track residual [mm]")
     ax[2, 1].legend(fontsize=7)
 

@@ -80,8 +80,9 @@ def table(result):
                  "%.1f (%+.0f %%)" % (1e3 * a["rmse_yaw_rad"], 100 * (a["rmse_yaw_rad"] / b["rmse_yaw_rad"] - 1))))
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
+    w2 = max(len(r[2]) for r in rows)
     for r in rows:
-        lines.append("  %-*s  %*s  %s" % (w0, r[0], w1, r[1], r[2]))
+        lines.append("  %-*s  %*s  %*s" % (w0, r[0], w1, r[1], w2, r[2]))
     lines.append("")
     if rep["effects"]:
         lines.append("final parameters (model.yaml): " + "; ".join(

@@ -8,7 +8,9 @@ minus predicted end pose) is split into along-track and cross-track parts in
 the model's body frame at the window start, and the yaw part.
 
 For a correct model these residuals are white noise: no autocorrelation
-(Ljung-Box test), zero mean (t test) and no correlation with anything the
+(portmanteau test on the autocorrelations, heteroskedasticity-robust like
+the correlation tests, because the residual's size varies with the motion),
+zero mean (t test) and no correlation with anything the
 model should have used (the commands during the window: mean, change,
 magnitude, product; the commands up to ``max_command_lag_s`` before it; the
 measured speed and turn rate; the heading; time). The three families of tests share the level ``residual_alpha``
@@ -48,7 +50,7 @@ class RobotResiduals:
 @dataclass
 class Analysis:
     robots: List[RobotResiduals]
-    ljung_box: Dict[str, dict]       # component -> {"q", "dof", "p"}
+    autocorr: Dict[str, dict]        # component -> {"q", "dof", "p"} of the robust portmanteau test
     mean_test: Dict[str, dict]       # component -> {"mean", "p"}
     correlations: List[dict]         # every (component, regressor): r, n, significant; strongest first
     r_critical: float
@@ -111,16 +113,33 @@ def robot_residuals(params, r, w, settings):
                           regressors(r, w, settings))
 
 
-def ljung_box(x, lags):
-    """Ljung-Box Q of a series (after removing its mean) over ``lags`` lags, and the lags used."""
+def portmanteau(x, lags):
+    """Heteroskedasticity-robust Box-Pierce statistic of a series (after removing its mean):
+    Q = sum over lags k of t_k^2, t_k = sum(x_t x_t-k) / sqrt(sum(x_t^2 x_t-k^2)).
+
+    Q is chi-square with ``lags`` degrees of freedom for uncorrelated residuals even when
+    their variance changes (the cross-track residual grows with speed, for instance),
+    where the plain Ljung-Box test rejects too often. Returns (Q, lags used).
+    """
     x = np.asarray(x, dtype=float) - np.mean(x)
-    n = x.size
-    lags = min(lags, n - 2)
-    denom = float(x @ x)
-    if lags < 1 or denom <= 0:
+    lags = min(lags, x.size - 2)
+    if lags < 1:
         return 0.0, 0
-    acf = np.array([float(x[:-k] @ x[k:]) / denom for k in range(1, lags + 1)])
-    return float(n * (n + 2) * np.sum(acf ** 2 / (n - np.arange(1, lags + 1)))), lags
+    q = 0.0
+    for k in range(1, lags + 1):
+        prod = x[k:] * x[:-k]
+        den = float(prod @ prod)
+        if den > 0:
+            q += float(prod.sum()) ** 2 / den
+    return q, lags
+
+
+def robust_t(x, y):
+    """Heteroskedasticity-consistent t statistic of the correlation of x and y."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    y = np.asarray(y, dtype=float) - np.mean(y)
+    den = float(np.sum((x * y) ** 2))
+    return float(x @ y) / np.sqrt(den) if den > 0 else 0.0
 
 
 def autocorrelation(x, lags):
@@ -140,7 +159,7 @@ def analyse(params, robots, settings, windows=None):
     for c in COMPONENTS:
         q, dof = 0.0, 0
         for rr in per_robot:
-            qi, di = ljung_box(rr.res[c], settings.residual_lags)
+            qi, di = portmanteau(rr.res[c], settings.residual_lags)
             q, dof = q + qi, dof + di
         lb[c] = {"q": q, "dof": dof, "p": float(stats.chi2.sf(q, dof)) if dof else 1.0}
         pooled = np.concatenate([rr.res[c] for rr in per_robot])
@@ -153,20 +172,22 @@ def analyse(params, robots, settings, windows=None):
     names = list(per_robot[0].reg) if per_robot else []
     n = sum(rr.t.size for rr in per_robot)
     n_tests = max(1, len(COMPONENTS) * len(names))
-    r_crit = float(stats.norm.isf(alpha / (2 * n_tests)) / np.sqrt(max(n - 3, 1)))
+    t_crit = float(stats.norm.isf(alpha / (2 * n_tests)))
+    r_crit = t_crit / np.sqrt(max(n - 3, 1))      # the same bound as |r| for constant-variance noise (plots)
     corr = []
     for c in COMPONENTS:
         y = np.concatenate([rr.res[c] for rr in per_robot])
         for name in names:
             x = np.concatenate([rr.reg[name] for rr in per_robot])
             r = 0.0 if np.std(x) == 0 or np.std(y) == 0 else float(np.corrcoef(x, y)[0, 1])
-            corr.append({"residual": c, "regressor": name, "r": r, "significant": abs(r) > r_crit})
+            t = robust_t(x, y) if r != 0.0 else 0.0
+            corr.append({"residual": c, "regressor": name, "r": r, "t": t, "significant": abs(t) > t_crit})
     corr.sort(key=lambda d: abs(d["r"]), reverse=True)
     bad_lb = [c for c in COMPONENTS if lb[c]["p"] < alpha / len(COMPONENTS)]
     bad_mean = [c for c in COMPONENTS if mean_test[c]["p"] < alpha / len(COMPONENTS)]
     sig = [d for d in corr if d["significant"]]
     white = not (bad_lb or bad_mean or sig)
-    notes = _notes(white, lb, bad_lb, mean_test, bad_mean, sig, per_robot, settings, r_crit)
+    notes = _notes(white, lb, bad_lb, mean_test, bad_mean, sig, per_robot, settings, t_crit)
     return Analysis(per_robot, lb, mean_test, corr, r_crit, white, notes)
 
 
@@ -174,17 +195,17 @@ def _fmt(c, value):
     return ("%.2f mm" % (1e3 * value)) if UNITS[c] == "m" else ("%.1f mrad" % (1e3 * value))
 
 
-def _notes(white, lb, bad_lb, mean_test, bad_mean, sig, per_robot, settings, r_crit):
+def _notes(white, lb, bad_lb, mean_test, bad_mean, sig, per_robot, settings, t_crit):
     n = sum(rr.t.size for rr in per_robot)
-    head = ("%d residual windows of %.1f s every %.1f s; tests at %.2g (Bonferroni)"
+    head = ("%d residual windows of %.1f s every %.1f s; tests at %.2g overall (Bonferroni)"
             % (n, settings.residual_horizon_s, settings.residual_stride_s, settings.residual_alpha))
     if white:
-        return ("white: no autocorrelation (Ljung-Box p = %s), zero mean, and no correlation with commands, "
-                "command changes, speed, turn rate, heading or time (all |r| < %.3f). %s"
-                % (", ".join("%s %.2f" % (c, lb[c]["p"]) for c in COMPONENTS), r_crit, head))
+        return ("white: no autocorrelation (p = %s), zero mean, and no correlation with the commands, command "
+                "changes, measured speed and turn rate, heading or time (all |t| < %.1f). %s"
+                % (", ".join("%s %.2f" % (c, lb[c]["p"]) for c in COMPONENTS), t_crit, head))
     parts = []
     if bad_lb:
-        parts.append("autocorrelated: %s (Ljung-Box p = %s)"
+        parts.append("autocorrelated: %s (p = %s)"
                      % (", ".join(bad_lb), ", ".join("%.2g" % lb[c]["p"] for c in bad_lb)))
     if bad_mean:
         parts.append("nonzero mean: %s" % ", ".join("%s %s" % (c, _fmt(c, mean_test[c]["mean"])) for c in bad_mean))
@@ -199,11 +220,11 @@ def summary(analysis):
     return {
         "white": bool(analysis.white),
         "notes": analysis.notes,
-        "ljung_box": {c: {k: float(v) if k != "dof" else int(v) for k, v in d.items()}
-                      for c, d in analysis.ljung_box.items()},
+        "autocorrelation_test": {c: {k: float(v) if k != "dof" else int(v) for k, v in d.items()}
+                                 for c, d in analysis.autocorr.items()},
         "mean": analysis.mean_test,
         "r_critical": analysis.r_critical,
-        "strongest_correlations": [dict(d, r=round(d["r"], 4), significant=bool(d["significant"]))
+        "strongest_correlations": [dict(d, r=round(d["r"], 4), t=round(d["t"], 2), significant=bool(d["significant"]))
                                    for d in analysis.correlations[:TOP_CORRELATIONS]],
         "rms": {c: float(np.sqrt(np.mean(analysis.pooled(c) ** 2))) for c in COMPONENTS},
     }

@@ -26,7 +26,7 @@ class IdentifySettings:
     # ... and lowers the improved RMSE on more than half of the robots.
     residual_horizon_s: float = 0.5  # s: horizon of the residual-analysis windows
     residual_stride_s: float = 0.6   # s: their spacing (> horizon: no shared pose sample, independent noise)
-    residual_lags: int = 10          # Ljung-Box lags (in windows)
+    residual_lags: int = 10          # autocorrelation-test lags (in windows)
     residual_alpha: float = 0.01     # significance level of the whiteness and correlation tests
     max_command_lag_s: float = 0.5   # s: regressors include the commands up to this far back
     max_nfev: int = 60               # least-squares function evaluations per fit
