@@ -27,3 +27,13 @@ def test_bad_settings(data, fragment):
     with pytest.raises(ConfigError) as e:
         IdentifySettings.from_dict({"identify": data}, where="cfg.yaml")
     assert fragment in str(e.value)
+
+
+def test_parameters_at_a_search_bound_are_flagged():
+    from puzzlebot_mpc.effects import NOMINAL
+    from puzzlebot_mpc.identify import core, fit
+
+    params = dict(NOMINAL, delay_s=fit.PARAM_SPECS["delay_s"][1], tau_v_s=0.0, tau_w_s=0.1)
+    sel = fit.Selection(["input_delay", "velocity_lag"], params, [], [], None, None)
+    warnings = core.bound_warnings(sel)
+    assert len(warnings) == 1 and "input_delay.delay_s = 0.5 is at the bound" in warnings[0]

@@ -8,6 +8,7 @@ from puzzlebot_mpc.effects import EFFECTS, NOMINAL, ActuatorModel
 from puzzlebot_mpc.identify import data, engine, fit, residuals
 from puzzlebot_mpc.identify.settings import IdentifySettings
 
+BOUND_TOLERANCE = 1e-4   # relative distance to a search bound counted as "at the bound"
 PARAM_DIGITS = 6     # decimals of the parameters written to the report and model.yaml
 
 
@@ -23,6 +24,7 @@ class Result:
     final_analysis: residuals.Analysis
     per_robot: Dict[str, dict]
     runtime_s: float
+    warnings: List[str]
 
     @property
     def effect_names(self) -> List[str]:
@@ -34,6 +36,23 @@ def _model(names, params):
     for name in names:
         model.add(name, {k: round(params[k], PARAM_DIGITS) for k in EFFECTS[name]})
     return model
+
+
+def bound_warnings(selection):
+    """Fitted parameters that ended on a bound of their search range (other than a zero
+    lower bound, which is a physical limit: no delay, no lag)."""
+    out = []
+    for name in selection.names:
+        for key in EFFECTS[name]:
+            if key not in fit.PARAM_SPECS:
+                continue
+            lo, hi = fit.PARAM_SPECS[key][:2]
+            value = selection.params[key]
+            for bound in (lo, hi):
+                if bound != 0.0 and abs(value - bound) <= BOUND_TOLERANCE * max(abs(bound), 1.0):
+                    out.append("%s.%s = %g is at the bound %g of its search range: the data may call for a "
+                               "larger value or for another effect" % (name, key, value, bound))
+    return out
 
 
 def identify(path, settings=None, robots=None, progress=None):
@@ -65,6 +84,9 @@ def identify(path, settings=None, robots=None, progress=None):
                 an.notes += (" Note: a CSV gives command times only to within a pose period (here +/-%.1f ms), "
                              "which by itself can structure the yaw residual of fast turns; a bag has the exact "
                              "command times." % (500.0 * period))
+    warnings = bound_warnings(selection)
+    for w in warnings:
+        say("warning: " + w)
     per_robot = {}
     if len(dataset.robots) > 1:
         for i, r in enumerate(dataset.robots):
@@ -77,4 +99,4 @@ def identify(path, settings=None, robots=None, progress=None):
             per_robot[r.name] = entry
         say("per-robot refits done")
     return Result(path, dataset, settings, problem, selection, _model(selection.names, selection.params),
-                  nominal_an, final_an, per_robot, time.time() - t_start)
+                  nominal_an, final_an, per_robot, time.time() - t_start, warnings)

@@ -55,10 +55,11 @@ class Windows:
 
 def nearest_samples(t, wanted, tol):
     """Index of the pose sample nearest each wanted time, and a mask of those within tol."""
-    j = np.clip(np.searchsorted(t, wanted), 1, t.size - 1) if t.size > 1 else np.zeros(wanted.size, int)
-    if t.size > 1:
-        left_closer = (wanted - t[j - 1]) <= (t[j] - wanted)
-        j = np.where(left_closer, j - 1, j)
+    if t.size < 2 or wanted.size == 0:
+        j = np.zeros(wanted.size, int)
+        return j, np.abs(t[j] - wanted) <= tol if t.size else np.zeros(wanted.size, bool)
+    j = np.clip(np.searchsorted(t, wanted), 1, t.size - 1)
+    j = np.where((wanted - t[j - 1]) <= (t[j] - wanted), j - 1, j)
     return j, np.abs(t[j] - wanted) <= tol
 
 
@@ -76,18 +77,14 @@ def split_time(r, fit_fraction):
 
 
 def make_windows(r, t_from, t_to, horizon, stride, settings):
-    """Windows of ``horizon`` s starting every ``stride`` s in [t_from, t_to - horizon]."""
+    """Windows of about ``horizon`` s starting every ``stride`` s, inside [t_from, t_to]."""
     tol = settings.pose_tolerance * median_period(r)
-    empty = np.zeros(0)
-    if t_to - horizon < t_from:
-        starts = empty
-    else:
-        starts = t_from + stride * np.arange(int(np.floor((t_to - horizon - t_from) / stride + 1e-9)) + 1)
-    i0, ok0 = nearest_samples(r.t, starts, tol) if starts.size else (np.zeros(0, int), np.zeros(0, bool))
-    i0 = np.unique(i0[ok0])
-    i0 = i0[(r.t[i0] >= t_from - tol) if i0.size else np.zeros(0, bool)]
-    i1, ok1 = nearest_samples(r.t, r.t[i0] + horizon, tol) if i0.size else (np.zeros(0, int), np.zeros(0, bool))
-    keep = ok1 & (r.t[i1] <= t_to + 1e-9) & (i1 > i0) if i0.size else np.zeros(0, bool)
+    count = int(np.floor((t_to - horizon - t_from) / stride + 1e-9)) + 1 if t_to - horizon >= t_from else 0
+    i0, ok = nearest_samples(r.t, t_from + stride * np.arange(count), tol)
+    i0 = np.unique(i0[ok])
+    i0 = i0[r.t[i0] >= t_from]
+    i1, ok = nearest_samples(r.t, r.t[i0] + horizon, tol)
+    keep = ok & (i1 > i0) & (r.t[i1] <= t_to)
     i0, i1 = i0[keep], i1[keep]
     ts, te = r.t[i0], r.t[i1]
     dt = settings.grid_dt_s

@@ -50,6 +50,7 @@ def report_dict(result):
                     "stride_s": s.window_stride_s},
         "trace": trace,
         "per_robot": result.per_robot,
+        "warnings": result.warnings,
         "runtime_s": round(result.runtime_s, 2),
     }
 
@@ -100,5 +101,7 @@ def table(result):
         for name, entry in rep["per_robot"].items():
             lines.append("  %s: %s" % (name, _params_text(entry["params"])))
     lines.append("residual: %s" % rep["residual"]["notes"])
+    for w in rep["warnings"]:
+        lines.append("warning: %s" % w)
     lines.append("runtime %.1f s" % rep["runtime_s"])
     return "\n".join(lines)
