@@ -63,6 +63,7 @@ def test_identifies_the_true_effects(tmp_path, scenario):
     result = core.identify(path)        # the tool sees the file only
 
     assert sorted(result.effect_names) == sorted(effects), result.selection.rounds
+    assert result.warnings == []        # no pose dropped as a glitch, no parameter at a search bound
     for name, params in effects.items():
         for key, true in params.items():
             got = result.selection.params[key]
@@ -102,6 +103,24 @@ def test_unknown_effect_is_reported_as_structured_residual(tmp_path):
     assert strongest["significant"]
     # a lever arm moves the marker sideways when the robot turns: turn-rate regressors show it
     assert "w_cmd" in strongest["regressor"] or "turn rate" in strongest["regressor"]
+
+
+def test_mocap_glitches_are_dropped(tmp_path):
+    """Marker swaps (a pose 5 cm off for one sample, the yaw flipped for two) are dropped with a
+    warning; the clean record then still comes out without effects."""
+    rec = synth.lab_record({}, n_robots=ROBOTS, duration=DURATION, seed=26)
+    r = rec["pz1"]
+    for k in range(500, r["t"].size - 500, 900):
+        r["x"][k] += 0.05
+        r["yaw"][k + 300:k + 302] = np.arctan2(np.sin(r["yaw"][k + 300:k + 302] + np.pi),
+                                               np.cos(r["yaw"][k + 300:k + 302] + np.pi))
+    path = str(tmp_path / "glitches.bag")
+    synth.write_bag(path, rec)
+    result = core.identify(path)
+    assert result.effect_names == []
+    assert len(result.warnings) == 1 and "robot pz1" in result.warnings[0] and "glitches" in result.warnings[0]
+    n_glitches = 3 * len(range(500, r["t"].size - 500, 900))
+    assert "%d pose sample(s)" % n_glitches in result.warnings[0]
 
 
 def test_command_line_end_to_end(tmp_path):

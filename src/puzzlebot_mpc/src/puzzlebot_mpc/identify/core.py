@@ -66,6 +66,9 @@ def identify(path, settings=None, robots=None, progress=None):
     say = progress or (lambda msg: None)
     t_start = time.time()
     dataset = data.load(path, robots)
+    warnings = data.drop_glitches(dataset, settings)
+    for w in warnings:
+        say("warning: " + w)
     say("read %s in %.1f s: %s" % (path, time.time() - t_start, "; ".join(
         "%s %.1f s, %d poses, %d commands" % (r.name, r.duration, r.t.size, r.cmd_t.size) for r in dataset.robots)))
     problem = fit.Problem(dataset, settings, say)
@@ -84,8 +87,8 @@ def identify(path, settings=None, robots=None, progress=None):
                 an.notes += (" Note: a CSV gives command times only to within a pose period (here +/-%.1f ms), "
                              "which by itself can structure the yaw residual of fast turns; a bag has the exact "
                              "command times." % (500.0 * period))
-    warnings = bound_warnings(selection)
-    for w in warnings:
+    for w in bound_warnings(selection):
+        warnings.append(w)
         say("warning: " + w)
     per_robot = {}
     if len(dataset.robots) > 1:

@@ -19,9 +19,10 @@ from dataclasses import dataclass, field
 from typing import List
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from puzzlebot_common import names
-from puzzlebot_common.geometry import yaw_from_quaternion
+from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
 
 CSV_COLUMNS = ("t", "robot", "x", "y", "yaw", "v_cmd", "w_cmd")
 POSE_TYPE = "geometry_msgs/TransformStamped"
@@ -157,7 +158,7 @@ def read_bag(path, robots=None):
             pairs = {}
             for spec in robots:
                 pose, cmd = spec.vicon_topic, names.cmd_vel_topic(spec.name)
-                for topic, wanted in ((pose, POSE_TYPE), (cmd, CMD_TYPE)):
+                for topic in (pose, cmd):
                     if topic not in topics:
                         raise DataError("%s: robot %s: topic %s is not in the bag" % (path, spec.name, topic))
                 pairs[spec.name] = (pose, cmd)
@@ -302,3 +303,39 @@ def read_csv(path, robots=None):
         items.append((name, poses, np.array(events, dtype=float).reshape(-1, 3)))
         unknown[name] = np.array(gaps, dtype=float).reshape(-1, 2)
     return _dataset(path, items, unknown, kind="csv")
+
+
+# -------------------------------------------------------------- mocap glitches
+GLITCH_WINDOW = 5    # samples of the running median a pose is compared with
+
+
+def drop_glitches(dataset, settings):
+    """Drop pose samples that jump away from their neighbours (marker swaps, reflections).
+
+    For each sample, the median over the GLITCH_WINDOW samples around it (itself
+    included) of its distance to them, in position and in wrapped yaw: a lone
+    glitch, or two in a row, is far from most of its window, a good sample next to
+    them is not. A sample is dropped when that median exceeds what the robot could
+    move in half the window's time span at ``glitch_speed`` (``glitch_turn_rate``)
+    plus a margin. Returns warnings (one per robot with glitches)."""
+    warnings = []
+    half = GLITCH_WINDOW // 2
+    for r in dataset.robots:
+        if r.t.size < GLITCH_WINDOW:
+            continue
+        idx = sliding_window_view(np.arange(r.t.size), GLITCH_WINDOW)    # windows, centre = idx[:, half]
+        centre = idx[:, half:half + 1]
+        span = 0.5 * (r.t[idx[:, -1]] - r.t[idx[:, 0]])
+        dist = np.hypot(r.x[idx] - r.x[centre], r.y[idx] - r.y[centre])
+        turn = np.abs(wrap_angle(r.yaw[idx] - r.yaw[centre]))
+        bad = np.zeros(r.t.size, bool)
+        bad[half:-half] = ((np.median(dist, axis=1) > settings.glitch_speed * span + settings.glitch_margin_m)
+                           | (np.median(turn, axis=1) > settings.glitch_turn_rate * span
+                              + settings.glitch_margin_rad))
+        if bad.any():
+            first = float(r.t[bad][0])
+            keep = ~bad
+            r.t, r.x, r.y, r.yaw = r.t[keep], r.x[keep], r.y[keep], r.yaw[keep]
+            warnings.append("robot %s: %d pose sample(s) jumping away from their neighbours dropped as mocap "
+                            "glitches (first at t=%.2f s from the start of the data)" % (r.name, int(bad.sum()), first))
+    return warnings

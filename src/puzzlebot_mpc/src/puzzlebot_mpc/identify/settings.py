@@ -30,6 +30,10 @@ class IdentifySettings:
     residual_alpha: float = 0.01     # significance level of the whiteness and correlation tests
     max_command_lag_s: float = 0.5   # s: regressors include the commands up to this far back
     max_nfev: int = 60               # least-squares function evaluations per fit
+    glitch_speed: float = 1.0        # m/s: a pose farther from its neighbours' median than this speed
+    glitch_margin_m: float = 0.01    # m    allows (plus this margin) is a mocap glitch and dropped
+    glitch_turn_rate: float = 20.0   # rad/s: the same for the yaw ...
+    glitch_margin_rad: float = 0.3   # rad  ... with this margin
 
     @classmethod
     def from_dict(cls, data, where="identify"):
@@ -40,7 +44,8 @@ class IdentifySettings:
     def check(self, where="identify"):
         require_positive(self, ["horizon_s", "window_stride_s", "history_s", "grid_dt_s", "pose_tolerance",
                                 "accept_margin", "residual_horizon_s", "residual_stride_s", "residual_lags",
-                                "residual_alpha", "max_nfev"], where)
+                                "residual_alpha", "max_nfev", "glitch_speed", "glitch_margin_m",
+                                "glitch_turn_rate", "glitch_margin_rad"], where)
         if not 0.0 < self.fit_fraction < 1.0:
             raise ConfigError("%s.fit_fraction: must be in (0, 1), got %r" % (where, self.fit_fraction))
         if self.max_worsening < 0:
