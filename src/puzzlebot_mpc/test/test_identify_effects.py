@@ -105,6 +105,18 @@ def test_unknown_effect_is_reported_as_structured_residual(tmp_path):
     assert "w_cmd" in strongest["regressor"] or "turn rate" in strongest["regressor"]
 
 
+def test_too_little_validation_data_adds_nothing(tmp_path):
+    """12 s of one robot: a strong delay explains most of the fitting cost, but 2 s of
+    validation windows cannot show it is significant, so nothing is added, with a warning."""
+    rec = synth.lab_record({"input_delay": {"delay_s": 0.1}}, n_robots=1, duration=12.0, seed=27)
+    path = str(tmp_path / "short.csv")
+    synth.write_csv(path, rec)
+    result = core.identify(path)
+    assert result.effect_names == []
+    assert "not significant" in result.selection.rounds[0].reason
+    assert any("too little to show" in w for w in result.warnings)
+
+
 def test_mocap_glitches_are_dropped(tmp_path):
     """Marker swaps (a pose 5 cm off for one sample, the yaw flipped for two) are dropped with a
     warning; the clean record then still comes out without effects."""

@@ -9,6 +9,7 @@ from puzzlebot_mpc.identify import data, engine, fit, residuals
 from puzzlebot_mpc.identify.settings import IdentifySettings
 
 BOUND_TOLERANCE = 1e-4   # relative distance to a search bound counted as "at the bound"
+FEW_BLOCKS = 10          # validation horizons below which significance is out of reach: warn
 PARAM_DIGITS = 6     # decimals of the parameters written to the report and model.yaml
 
 
@@ -75,6 +76,12 @@ def identify(path, settings=None, robots=None, progress=None):
     n_fit = sum(len(w[0]) for w in problem.windows)
     n_val = sum(len(w[1]) for w in problem.windows)
     say("%d fitting and %d validation windows of %.1f s" % (n_fit, n_val, settings.horizon_s))
+    blocks = sum(len(w[1]) for w in problem.windows) * settings.window_stride_s / settings.horizon_s
+    if blocks < FEW_BLOCKS:
+        warnings.append("only %.0f s of validation windows: too little to show that an effect is significant; "
+                        "record longer (each robot's last %.0f %% is validation)"
+                        % (blocks * settings.horizon_s, 100 * (1 - settings.fit_fraction)))
+        say("warning: " + warnings[-1])
     selection = fit.trace_and_add(problem)
     say("effects: %s" % (", ".join(selection.names) or "none"))
     windows = [residuals.residual_windows(r, settings) for r in dataset.robots]

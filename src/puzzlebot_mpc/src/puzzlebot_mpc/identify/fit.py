@@ -14,7 +14,8 @@ with the least squares.
 Trace and add: each round fits the current model plus each candidate not yet
 in it, ranks the candidates by the fraction of the current fitting cost they
 explain, and adds the best one if it earns its place on the validation
-windows (``accepts``); otherwise, or when no candidate is left, it stops.
+windows (``accepts``: a clear margin, on most robots, and significant);
+otherwise, or when no candidate is left, it stops.
 """
 
 import math
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Dict, List
 
 import numpy as np
+from scipy import stats
 from scipy.optimize import least_squares
 
 from puzzlebot_mpc.effects import EFFECTS, NOMINAL
@@ -180,13 +182,37 @@ class Problem:
         return p
 
 
-def accepts(settings, current, trial):
-    """Does ``trial`` earn its place over ``current``? Both are (pooled, per-robot) validation metrics.
+def improvement_p_value(settings, cur_errs, new_errs, what):
+    """One-sided p-value that ``new`` predicts better than ``cur`` (position or yaw).
+
+    Windows overlap (a 1 s horizon every 0.1 s), so the per-window differences of
+    squared errors are averaged over blocks of one horizon (independent enough);
+    the block means get a one-sided Wilcoxon signed-rank test: do most blocks
+    improve? (Robust to a few blocks with large errors either way, which a t test
+    on the mean is not.) Returns (p, number of blocks)."""
+    per_block = max(1, int(round(settings.horizon_s / settings.window_stride_s)))
+    blocks = []
+    for (cp, cy), (np_, ny) in zip(cur_errs, new_errs):
+        d = np.abs(cp) ** 2 - np.abs(np_) ** 2 if what == "position" else cy ** 2 - ny ** 2
+        n = d.size // per_block
+        if n:
+            blocks.append(d[:n * per_block].reshape(n, per_block).mean(axis=1))
+    b = np.concatenate(blocks) if blocks else np.zeros(0)
+    b = b[b != 0.0]
+    if b.size < 1:
+        return 1.0, 0
+    return float(stats.wilcoxon(b, alternative="greater").pvalue), int(b.size)
+
+
+def accepts(settings, current, trial, cur_errs, new_errs):
+    """Does ``trial`` earn its place over ``current``? Both are (pooled, per-robot) validation
+    metrics; ``*_errs`` the per-robot validation errors behind them.
 
     Rule: the pooled validation position or yaw RMSE drops by at least
-    ``accept_margin``, neither rises by more than ``max_worsening``, and the
-    RMSE that dropped is lower on more than half of the robots. Returns
-    (accepted, reason).
+    ``accept_margin``, neither rises by more than ``max_worsening``, the RMSE
+    that dropped is lower on more than half of the robots, and the drop is
+    significant (one-sided Wilcoxon p < ``accept_alpha`` over blocks of one horizon).
+    Returns (accepted, reason).
     """
     (cur, cur_r), (new, new_r) = current, trial
     gains = {"position": 1.0 - new.rmse_pos_m / cur.rmse_pos_m, "yaw": 1.0 - new.rmse_yaw_rad / cur.rmse_yaw_rad}
@@ -194,16 +220,27 @@ def accepts(settings, current, trial):
         worse = min(gains, key=gains.get)
         return False, "%s RMSE rises by %.1f %% (limit %.0f %%)" % (worse, -100 * gains[worse],
                                                                      100 * settings.max_worsening)
+    why_not = []
     for what in sorted(gains, key=gains.get, reverse=True):
         if gains[what] < settings.accept_margin:
             continue
         attr = "rmse_pos_m" if what == "position" else "rmse_yaw_rad"
         better = sum(getattr(n, attr) < getattr(c, attr) for c, n in zip(cur_r, new_r))
-        if better * 2 > len(cur_r):
-            return True, "%s RMSE -%.1f %% (margin %.0f %%), lower on %d of %d robots" % (
-                what, 100 * gains[what], 100 * settings.accept_margin, better, len(cur_r))
+        if better * 2 <= len(cur_r):
+            why_not.append("%s RMSE -%.1f %% but lower on only %d of %d robots" % (
+                what, 100 * gains[what], better, len(cur_r)))
+            continue
+        p, blocks = improvement_p_value(settings, cur_errs, new_errs, what)
+        if p >= settings.accept_alpha:
+            why_not.append("%s RMSE -%.1f %% but not significant (p = %.2g over %d blocks of %.1f s)" % (
+                what, 100 * gains[what], p, blocks, settings.horizon_s))
+            continue
+        return True, "%s RMSE -%.1f %% (margin %.0f %%), lower on %d of %d robots, p = %.1g" % (
+            what, 100 * gains[what], 100 * settings.accept_margin, better, len(cur_r), p)
+    if why_not:
+        return False, "; ".join(why_not)
     best = max(gains, key=gains.get)
-    return False, "best gain %.1f %% in %s RMSE, below the %.0f %% margin or not on most robots" % (
+    return False, "best gain %.1f %% in %s RMSE, below the %.0f %% margin" % (
         100 * gains[best], best, 100 * settings.accept_margin)
 
 
@@ -231,6 +268,7 @@ def trace_and_add(problem, candidates=None):
     remaining = list(candidates or EFFECTS)
     names, params = [], dict(NOMINAL)
     current = nominal = problem.validation(params)
+    current_errs = problem.validation_errors(params)
     steps, rounds = [], []
     while remaining:
         t0 = time.time()
@@ -243,8 +281,10 @@ def trace_and_add(problem, candidates=None):
             cands.append(Candidate(name, p, c, 1.0 - c / cost if cost > 0 else 0.0))
         cands.sort(key=lambda c: c.explained, reverse=True)
         best = cands[0]
-        best.validation, best.per_robot = problem.validation(best.params)
-        ok, reason = accepts(settings, current, (best.validation, best.per_robot))
+        best_errs = problem.validation_errors(best.params)
+        best.validation = engine.metric(best_errs)
+        best.per_robot = [engine.metric([e]) for e in best_errs]
+        ok, reason = accepts(settings, current, (best.validation, best.per_robot), current_errs, best_errs)
         rounds.append(Round(cands, best.name, ok, reason))
         problem.progress("round %d (%.1f s): %s; best %s explains %.1f %% of the fitting cost: %s, %s"
                          % (len(rounds), time.time() - t0,
@@ -253,7 +293,7 @@ def trace_and_add(problem, candidates=None):
         if not ok:
             break
         names.append(best.name)
-        params, current = best.params, (best.validation, best.per_robot)
+        params, current, current_errs = best.params, (best.validation, best.per_robot), best_errs
         steps.append({"name": best.name, "params": {k: params[k] for k in EFFECTS[best.name]},
                       "after": best.validation, "per_robot": best.per_robot, "reason": reason})
         remaining.remove(best.name)

@@ -11,8 +11,10 @@ def _rmse(metric):
 
 def margin_text(settings):
     return ("an effect is added if it lowers the validation position or yaw RMSE by at least %.0f %%, raises "
-            "neither by more than %.0f %%, and lowers the improved RMSE on more than half of the robots"
-            % (100 * settings.accept_margin, 100 * settings.max_worsening))
+            "neither by more than %.0f %%, lowers the improved RMSE on more than half of the robots, and the "
+            "improvement is significant (one-sided p < %.2g over blocks of %.1f s)"
+            % (100 * settings.accept_margin, 100 * settings.max_worsening, settings.accept_alpha,
+               settings.horizon_s))
 
 
 def report_dict(result):

@@ -23,7 +23,8 @@ class IdentifySettings:
     accept_margin: float = 0.10      # an effect is added only if it cuts the validation position or yaw
                                      # RMSE by at least this fraction ...
     max_worsening: float = 0.02      # ... raises neither by more than this fraction ...
-    # ... and lowers the improved RMSE on more than half of the robots.
+    # ... lowers the improved RMSE on more than half of the robots ...
+    accept_alpha: float = 0.01       # ... and significantly: one-sided p below this (blocks of one horizon)
     residual_horizon_s: float = 0.5  # s: horizon of the residual-analysis windows
     residual_stride_s: float = 0.6   # s: their spacing (> horizon: no shared pose sample, independent noise)
     residual_lags: int = 10          # autocorrelation-test lags (in windows)
@@ -43,7 +44,7 @@ class IdentifySettings:
 
     def check(self, where="identify"):
         require_positive(self, ["horizon_s", "window_stride_s", "history_s", "grid_dt_s", "pose_tolerance",
-                                "accept_margin", "residual_horizon_s", "residual_stride_s", "residual_lags",
+                                "accept_margin", "accept_alpha", "residual_horizon_s", "residual_stride_s", "residual_lags",
                                 "residual_alpha", "max_nfev", "glitch_speed", "glitch_margin_m",
                                 "glitch_turn_rate", "glitch_margin_rad"], where)
         if not 0.0 < self.fit_fraction < 1.0:
@@ -55,5 +56,5 @@ class IdentifySettings:
         if self.grid_dt_s > self.window_stride_s:
             raise ConfigError("%s.grid_dt_s (%g) must be <= window_stride_s (%g)"
                               % (where, self.grid_dt_s, self.window_stride_s))
-        if self.residual_alpha >= 1:
-            raise ConfigError("%s.residual_alpha: must be < 1" % where)
+        if self.residual_alpha >= 1 or self.accept_alpha >= 1:
+            raise ConfigError("%s.residual_alpha and accept_alpha: must be < 1" % where)
