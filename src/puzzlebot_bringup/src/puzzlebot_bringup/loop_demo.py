@@ -21,7 +21,8 @@ node's core) in lockstep, as ``sim.launch`` runs them: poses at 100 Hz fed
 to the controller, one control step every 0.1 s of simulated time, the
 command applied at once (the effects then delay and lag it).
 
-    rosrun puzzlebot_bringup loop_demo [--seeds 1-5] [--record-seed 0] [--out-dir DIR] [--jobs 2]
+    rosrun puzzlebot_bringup loop_demo [--seeds 1-5] [--record-seed 0] [--out-dir DIR] [--config loop_demo_timing]
+                                       [--ablation] [--no-coupling] [--jobs 2]
 """
 
 import argparse
@@ -103,13 +104,15 @@ class Config:
     true_model: object        # effects.ActuatorModel: everything injected, in model terms (the reference)
 
 
-def config_path():
-    here = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "config", "loop_demo.yaml")
+def config_path(name="loop_demo.yaml"):
+    """A shipped configuration (config/NAME, ".yaml" optional) in the source or install space."""
+    name = name if name.endswith(".yaml") else name + ".yaml"
+    here = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "config", name)
     if os.path.isfile(here):
         return os.path.normpath(here)
     from puzzlebot_common.config import package_path
 
-    return package_path("puzzlebot_bringup", "config", "loop_demo.yaml")
+    return package_path("puzzlebot_bringup", "config", name)
 
 
 def load_config(path=None, overrides=None):
@@ -601,13 +604,17 @@ def main(argv=None):
     ap.add_argument("--record-seed", type=int, default=0, help="seed of the recorded (identification) run")
     ap.add_argument("--out-dir", default="loop_demo_out", help="bag, model.yaml, reports, figure, JSON")
     ap.add_argument("--figure", default=None, help="write the figure here (default OUT_DIR/loop_demo.png)")
-    ap.add_argument("--config", default=None, help="loop_demo.yaml (default: the package's)")
+    ap.add_argument("--config", default=None,
+                    help="a loop_demo.yaml: a path, or the name of a shipped one (loop_demo, loop_demo_timing)")
     ap.add_argument("--jobs", type=int, default=1, help="parallel processes for the evaluation runs")
     ap.add_argument("--no-coupling", action="store_true", help="skip the coupling trials")
     ap.add_argument("--ablation", action="store_true", help="also the true model restricted to each effect")
     args = ap.parse_args(argv)
     try:
-        cfg = load_config(args.config)
+        path = args.config
+        if path and not os.path.isfile(path) and os.sep not in path:
+            path = config_path(path)
+        cfg = load_config(path)
         seeds = parse_seeds(args.seeds)
         if args.jobs < 1:
             raise ValueError("--jobs must be >= 1")
