@@ -38,7 +38,7 @@ import numpy as np
 
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
-from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
+from puzzlebot_common.geometry import yaw_from_quaternion
 from puzzlebot_common.params import from_mapping, require_positive
 from puzzlebot_mpc.compensation import describe_model
 
@@ -77,7 +77,7 @@ class DemoSettings:
     pair_epsilon: float = 0.003       # m, MPC pair status margin in Bullet (sim.launch)
     couple_trials: int = 6            # coupling trials per seed (two robots with anchors)
     couple_timeout: float = 40.0      # s, simulated
-    couple_gap: float = 0.065         # m, start distance of the two robots' centres along x (paper: 65 mm)
+    couple_gap: float = 0.085         # m, start distance of the two robots' centres along x (paper: 65 mm)
     couple_offset_max: float = 0.03   # m, sideways offsets 0..max over the trials (paper: 0..30 mm)
     couple_yaw: float = 0.3           # rad, start headings uniform in +-couple_yaw
 
@@ -131,8 +131,8 @@ def load_config(path=None, overrides=None):
 def true_model(demo, injected):
     """The injected effects as an actuator model: the plant's effects, the wheel imbalance as a yaw-rate
     bias (right x (1 + k), left x (1 - k) turns by 2 k v / wheel base; the change of v, k w b / 2, is
-    negligible), the mocap heading offset. What the simulated robot itself adds to a unicycle (its
-    wheels drive a few % fast, docs/model-identification.md) is not in it: nobody declared it."""
+    negligible), the mocap heading offset. Whatever the simulated robot itself adds to a unicycle (e.g.
+    the ~30 ms of its torque-limited wheels) is not in it: nobody declared it."""
     from puzzlebot_mpc.effects import ActuatorModel
     from puzzlebot_sim.params import RobotParams
 
@@ -170,7 +170,7 @@ class Lockstep:
         self.world, self.loop, self.names = world, loop, names
         self.per_pose = int(round(1.0 / (pose_rate * world.dt)))
         self.per_control = int(round(dt * pose_rate))
-        self.dt_control = dt
+        self.pose_rate = pose_rate
         self.record = record
         self.poses = {n: [] for n in names}      # measured (t, x, y, yaw) as published
         self.commands = {n: [] for n in names}   # (t, v, w) as sent
@@ -194,14 +194,14 @@ class Lockstep:
 
     def settle(self, seconds):
         """Run the world with the robots at rest, feeding poses (the controller sees the robots first)."""
-        for _ in range(int(round(seconds * self.per_control / self.dt_control))):
+        for _ in range(int(round(seconds * self.pose_rate))):
             self.world.step(self.per_pose)
             self._feed()
 
     def control_step(self):
         t = round(self.world.time, 9)
         out = self.loop.step(t)
-        self.failures += 0 if out.result.success or out.result.fallback == "" else 1
+        self.failures += 0 if out.result.success else 1
         for n in self.names:
             v, w = out.commands[n]
             self.world.set_command(n, v, w)
@@ -223,7 +223,8 @@ def draw_goals(rng, home, n, demo):
             if demo.leg_min <= np.linalg.norm(g - prev) <= demo.leg_max:
                 break
         else:
-            raise ConfigError("cannot draw goals %g..%g m apart within +-%g m" % (demo.leg_min, demo.leg_max, demo.area))
+            raise ConfigError("cannot draw goals %g..%g m apart within +-%g m"
+                              % (demo.leg_min, demo.leg_max, demo.area))
         goals.append((float(g[0]), float(g[1])))
         prev = g
     return goals
