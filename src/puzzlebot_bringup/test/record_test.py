@@ -11,10 +11,12 @@ stops the recorder with SIGINT (as Ctrl-C or the end of sim.launch does) and rea
   strictly increasing and within the bag's time span (record times are simulated times);
 - every robot has non-zero commands, tf has world -> <r>/base_link and <r>/anchor, the
   connection pairs include the coupled pair;
-- with the model-identification tool installed (puzzlebot_mpc.identify, issue 7), its bag reader
-  loads the bag: both robots with poses and commands.
+- the model-identification tool (`rosrun puzzlebot_mpc identify_model BAG --out report.json`,
+  issue 7) reads the bag and reports both robots with a finite prediction error.
 """
 
+import json
+import math
 import os
 import signal
 import subprocess
@@ -37,6 +39,7 @@ from puzzlebot_bringup.scenario import parse_scenario
 POSE_RATE = 100.0          # Hz of simulated time (puzzlebot_sim config/sim.yaml pose_rate)
 SUBSCRIBE_TIMEOUT = 30.0   # s (wall) for rosbag record to subscribe to the topics
 STOP_TIMEOUT = 30.0        # s (wall) for rosbag record to close the bag
+IDENTIFY_TIMEOUT = 120.0   # s (wall) for identify_model on the short bag (0.4 s unloaded)
 
 
 class RecordBag(unittest.TestCase):
@@ -114,16 +117,18 @@ class RecordBag(unittest.TestCase):
                         if p.status == ConnectionPair.STATUS_HEAD_INSERTED]
             self.assertTrue(inserted, "no coupled pair in the recorded connection pairs")
 
-        try:
-            from puzzlebot_mpc.identify import data as identify_data
-        except ImportError:
-            print("model-identification tool (puzzlebot_mpc.identify) not installed: its reader not run", flush=True)
-            return
-        dataset = identify_data.load(self.bag_path)
-        self.assertEqual(sorted(dataset.robot_names()), sorted(self.names))
-        print("identify reader: %s" % ", ".join("%s %d poses, %d commands" % (r.name, r.t.size, r.cmd_t.size)
-                                                for r in dataset.robots), flush=True)
-
+        # the model-identification tool (issue 7) on the bag, as a user runs it
+        report_path = os.path.splitext(self.bag_path)[0] + "_identify.json"
+        proc = subprocess.run(["rosrun", "puzzlebot_mpc", "identify_model", self.bag_path, "--out", report_path,
+                               "--quiet"], capture_output=True, text=True, timeout=IDENTIFY_TIMEOUT)
+        self.assertEqual(proc.returncode, 0, "identify_model failed: %s" % (proc.stderr or proc.stdout)[-2000:])
+        with open(report_path) as f:
+            report = json.load(f)
+        self.assertEqual(sorted(report["robots"]), sorted(self.names))
+        before = report["before"]["rmse_pos_m"]
+        self.assertTrue(math.isfinite(before), report["before"])
+        print("identify_model on the bag: %s; nominal unicycle position RMSE %.2f mm, effects: %s"
+              % (report_path, 1e3 * before, [e.get("name", e) for e in report["effects"]] or "none"), flush=True)
 
 if __name__ == "__main__":
     rospy.init_node("record_test", argv=sys.argv)

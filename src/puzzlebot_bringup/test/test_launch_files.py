@@ -13,7 +13,7 @@ from puzzlebot_driver.params import driver_config, emulator_config
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PKG = os.path.dirname(HERE)
-LAUNCH = {name: os.path.join(PKG, "launch", name + ".launch") for name in ("sim", "lab", "record")}
+LAUNCH = {name: os.path.join(PKG, "launch", name + ".launch") for name in ("sim", "lab", "record", "replay")}
 
 
 def load_launch(name, **args):
@@ -95,6 +95,16 @@ def test_lab_launch_scenario_and_robot_list_combine():
     c = load_launch("lab", emulate="true", scenario="goto3", run_scenario="false",
                     robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
     assert "scenario_runner" not in node_names(c)
+
+
+def test_replay_launch_plays_with_the_runs_robots():
+    c = load_launch("replay", bag="/tmp/run.bag", scenario="couple2")
+    assert node_names(c) == ["markers", "play", "rviz"]
+    assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2"]
+    assert [n for n in c.nodes if n.name == "play"][0].args == "--clock -r 1.0 /tmp/run.bag"
+    lab = load_launch("replay", bag="/tmp/run.bag", rviz="false", robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
+    assert node_names(lab) == ["markers", "play"]
+    assert [r.ip_octet for r in parse_robot_list(lab.params["/puzzlebot/robots"].value)] == [41, 42, 43]
 
 
 def test_lab_robot_list_and_configs_parse():
