@@ -72,7 +72,8 @@ class RecordBag(unittest.TestCase):
         recorder = subprocess.Popen(["roslaunch", "puzzlebot_bringup", "record.launch", "bag:=" + self.bag_path],
                                     stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
         try:
-            self.wait_subscribed(vicon + cmd + [names.SOLVER_STATS_TOPIC, "/tf"])
+            self.wait_subscribed(vicon + cmd + [names.SOLVER_STATS_TOPIC, names.CONNECTION_PAIRS_TOPIC,
+                                                 names.PHYSICAL_PAIRS_TOPIC, names.PREDICTED_TRAJECTORIES_TOPIC, "/tf"])
             for step in self.scenario.steps:
                 result = self.runner.run_step(step, 0.0, time.monotonic() + 300.0)
                 self.assertEqual(result.outcome, "succeeded", "%s: %s" % (step.describe(), result.message))

@@ -174,7 +174,7 @@ def placed_slots(slot_robots, slots, poses, pairs):
     assembly forms where the robots meet), so the target is drawn anchored on
     the first robot (slot order) of the largest coupled assembly: its slot
     coincides with its current pose and the other slots show where the others
-    belong. Empty if that robot's pose is unknown.
+    belong. Only robots with a pose can be the reference; empty if none has one.
     """
     present = [r for r in slot_robots if r in poses]
     if not present:

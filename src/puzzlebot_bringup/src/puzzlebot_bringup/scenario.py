@@ -41,7 +41,7 @@ This module parses and checks scenarios and formats the end-of-run summary.
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Tuple
 
 from puzzlebot_common.errors import ConfigError
 
