@@ -18,7 +18,7 @@ from dataclasses import replace
 import numpy as np
 
 from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
-from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.world import RobotStart, SimWorld
 
 #: Control period of the scripted drivers [s] (the MPC's rate).
@@ -27,9 +27,10 @@ CONTROL_DT = 0.05
 MATE_GAP = 0.0003
 
 
-def _world(starts, sim, robot, anchor, world="flat", world_params=None):
+def _world(starts, sim, robot, anchor, world="flat", world_params=None, anchor_rest=AnchorRestParams()):
     return SimWorld(robot, starts, world=world, physics_rate=sim.physics_rate, anchor_params=anchor,
-                    world_params=world_params, solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed)
+                    world_params=world_params, solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed,
+                    anchor_rest=anchor_rest)
 
 
 def _status(w, anchor_robot, opening_robot):
@@ -187,14 +188,16 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=20.0, sim
                 "time_s": round(w.time - t0, 2) if all(down) else None}
 
 
-def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams(),
+               anchor_rest=AnchorRestParams()):
     """Wall-clock speed of a headless world of ``robots`` robots with anchors.
 
     Layout on a grid 0.2 m apart: half of the robots (rounded up to a pair)
     stand in coupled pairs, the others alone; every robot drives (v = 0.03
     m/s, gentle seeded turns), so every anchor rides in its holder and the
     coupled ones carry load. Returns robots, sim_seconds, wall_seconds,
-    real_time_factor (sim / wall) and cpu_seconds.
+    real_time_factor (sim / wall), cpu_seconds, the coupled pairs and the
+    anchors frozen at rest (``anchor_rest``) at the end.
     """
     rng = np.random.default_rng(seed)
     coupled = min(robots, 2 * int(math.ceil(robots / 4.0)))
@@ -206,7 +209,7 @@ def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams()
         starts.append(RobotStart("r%d" % len(starts), cx, cy, 0.0))
         if k < coupled // 2:
             starts.append(RobotStart("r%d" % len(starts), cx - robot.body_side - MATE_GAP, cy, 0.0))
-    w = _world(starts, replace(sim, seed=seed), robot, anchor)
+    w = _world(starts, replace(sim, seed=seed), robot, anchor, anchor_rest=anchor_rest)
     try:
         turns = {s.name: rng.uniform(-0.3, 0.3) for s in starts}
         for s in starts:
@@ -215,11 +218,12 @@ def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams()
         w.run(sim_seconds)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
         pairs = len(w.physical_pairs())
+        resting = len(w.resting_anchors())
     finally:
         w.close()
     return {"robots": robots, "sim_seconds": sim_seconds, "wall_seconds": round(wall, 4),
             "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 4),
-            "coupled_pairs_at_end": pairs}
+            "coupled_pairs_at_end": pairs, "resting_anchors_at_end": resting}
 
 
 def summarize(results):
