@@ -264,6 +264,8 @@ class SimParams:
     gui: bool = False
     seed: int = 0
     solver_iterations: int = 15      # Bullet constraint solver iterations per step
+    tilted_solver_iterations: int = 100  # ... while any robot is tilted by more than tilt_threshold (edges, hanging)
+    tilt_threshold: float = 0.15     # rad
     erp: float = 0.2                 # contact error reduction (per step)
     anchors: bool = True             # give every robot its soft anchor
     # injectable effects (off by default)
@@ -280,7 +282,8 @@ class SimParams:
 
     def check(self, where="sim"):
         require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "cmd_timeout", "sync_period",
-                                "sync_timeout", "sync_startup_timeout", "solver_iterations", "erp"], where)
+                                "sync_timeout", "sync_startup_timeout", "solver_iterations", "erp",
+                                "tilted_solver_iterations", "tilt_threshold"], where)
         if self.real_time_factor < 0:
             raise ConfigError("%s.real_time_factor: must be >= 0 (0 = as fast as possible)" % where)
         if self.physics_rate % self.pose_rate:

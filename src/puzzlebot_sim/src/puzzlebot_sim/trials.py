@@ -30,7 +30,8 @@ MATE_GAP = 0.0003
 def _world(starts, sim, robot, anchor, world="flat", world_params=None, anchor_rest=AnchorRestParams()):
     return SimWorld(robot, starts, world=world, physics_rate=sim.physics_rate, anchor_params=anchor,
                     world_params=world_params, solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed,
-                    anchor_rest=anchor_rest)
+                    anchor_rest=anchor_rest, tilted_solver_iterations=sim.tilted_solver_iterations,
+                    tilt_threshold=sim.tilt_threshold)
 
 
 def _status(w, anchor_robot, opening_robot):

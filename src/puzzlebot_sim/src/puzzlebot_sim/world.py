@@ -168,13 +168,16 @@ class SimWorld:
     puzzlebot_mpc.effects.ActuatorModel applied to every robot's commands,
     None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
     ``mocap`` (MocapModel), ``anchor_rest`` (AnchorRestParams: when resting
-    anchors are frozen to their robot; off with the GUI, which would not show them).
+    anchors are frozen to their robot; off with the GUI, which would not show them),
+    ``tilted_solver_iterations`` (solver iterations while any robot is tilted by more
+    than ``tilt_threshold`` rad: robots falling over an edge or hanging load the light
+    anchor links with large impulses, which the solver needs more iterations for).
     """
 
     def __init__(self, robot_params, starts, world="flat", physics_rate=200, gui=False, *,
                  anchor_params=AnchorParams(), world_params=None, solver_iterations=15, erp=0.2, seed=0,
                  actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel(),
-                 anchor_rest=AnchorRestParams()):
+                 anchor_rest=AnchorRestParams(), tilted_solver_iterations=100, tilt_threshold=0.15):
         if world not in WORLDS:
             raise ConfigError("unknown world %r; known worlds: %s" % (world, ", ".join(sorted(WORLDS))))
         if not starts:
@@ -215,14 +218,16 @@ class SimWorld:
         pb.setPhysicsEngineParameter(numSolverIterations=solver_iterations, erp=erp, contactERP=erp,
                                      frictionERP=erp, deterministicOverlappingPairs=1, enableConeFriction=0,
                                      physicsClientId=c)
+        self._solver_iterations = (solver_iterations, max(solver_iterations, tilted_solver_iterations))
+        self._cos_tilt = math.cos(tilt_threshold)
+        self._tilted = False
+        self._monitor_steps = int(round(anchor_rest.check_period / self.dt))
+        if self._monitor_steps < 1 or abs(self._monitor_steps * self.dt - anchor_rest.check_period) > 1e-9:
+            raise ConfigError("anchor_rest.check_period (%g s) must be a whole number of physics steps (%g s)"
+                              % (anchor_rest.check_period, self.dt))
         self._rest = None
-        self._rest_steps = 0
         if anchor_params is not None and anchor_rest.enabled and not gui:
             self._rest = anchor_rest
-            self._rest_steps = int(round(anchor_rest.check_period / self.dt))
-            if self._rest_steps < 1 or abs(self._rest_steps * self.dt - anchor_rest.check_period) > 1e-9:
-                raise ConfigError("anchor_rest.check_period (%g s) must be a whole number of physics steps (%g s)"
-                                  % (anchor_rest.check_period, self.dt))
             self._anchor_mass = anchor_params.mass
             self._exposed = self._exposed_anchor_box(robot_params, anchor_params)
         if self._rest is not None:
@@ -366,8 +371,8 @@ class SimWorld:
             self._apply_controls()
             pb.stepSimulation(physicsClientId=self.client)
             self.steps += 1
-            if self._rest is not None and self.steps % self._rest_steps == 0:
-                self._update_rest()
+            if self.steps % self._monitor_steps == 0:
+                self._monitor()
 
     def run(self, seconds):
         """Advance by ``seconds`` of simulated time (rounded to whole steps)."""
@@ -510,10 +515,20 @@ class SimWorld:
         return (math.dist(a_lin, carried) <= rest.max_rel_speed
                 and math.dist(a_ang, ang) <= rest.max_rel_rate)
 
-    def _update_rest(self):
+    def _monitor(self):
+        """Every check period: solver iterations for tilted robots, resting anchors."""
+        poses = {n: self.pose(n) for n in self.names}
+        tilted = any(1.0 - 2.0 * (orn[0] ** 2 + orn[1] ** 2) < self._cos_tilt for _, orn in poses.values())
+        if tilted != self._tilted:
+            self._tilted = tilted
+            pb.setPhysicsEngineParameter(numSolverIterations=self._solver_iterations[tilted],
+                                         physicsClientId=self.client)
+        if self._rest is not None:
+            self._update_rest(poses)
+
+    def _update_rest(self, poses):
         """Freeze anchors that rest with nothing near; wake frozen ones that something may disturb."""
         c, rest = self.client, self._rest
-        poses = {n: self.pose(n) for n in self.names}
         zones = self._zones(poses)
         for name in self.names:
             robot = self.robots[name]
@@ -704,7 +719,8 @@ class SimWorld:
                    anchor_params=anchor_params if sim.anchors else None, world_params=world_params,
                    solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed,
                    actuator_model=actuator_model, wheel_imbalance=sim.wheel_imbalance,
-                   mocap=MocapModel.from_sim(sim), anchor_rest=anchor_rest)
+                   mocap=MocapModel.from_sim(sim), anchor_rest=anchor_rest,
+                   tilted_solver_iterations=sim.tilted_solver_iterations, tilt_threshold=sim.tilt_threshold)
 
     def close(self):
         if self.client is not None and pb.isConnected(physicsClientId=self.client):
