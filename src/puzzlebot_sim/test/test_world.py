@@ -219,3 +219,23 @@ def test_resting_anchor_is_frozen_follows_its_robot_and_wakes_when_approached():
         assert [(p.anchor_robot, p.opening_robot, p.status) for p in w.physical_pairs()] == [("a", "o", HEAD_INSERTED)]
         w.reset_anchor("o", 0.2)                     # experiments may reset a frozen anchor
         assert "o" not in w.resting_anchors()
+
+
+def _holder_yaw(pull, sign):
+    """Yaw of the anchor in its holder under a small torque, pulled out (pull) or pushed in."""
+    with SimWorld(RobotParams(), [RobotStart("a", 0, 0, 0)], anchor_rest=AnchorRestParams(enabled=False)) as w:
+        w.run(0.1)
+        body, c = w.robots["a"]["anchor"], w.client
+        for _ in range(300):
+            f = -0.02 if pull else 0.02                          # along the robot's x (it faces +x)
+            pb.applyExternalForce(body, -1, [f, 0, 0], w.anchor_pose("a")[0], pb.WORLD_FRAME, physicsClientId=c)
+            pb.applyExternalTorque(body, -1, [0, 0, sign * 3e-4], pb.WORLD_FRAME, physicsClientId=c)
+            w.step(1)
+        return wrap_angle(w.anchor_pose2d("a")[2] - w.pose2d("a")[2])
+
+
+def test_anchor_yaws_in_its_holder_and_is_squared_up_when_pushed_in():
+    free = [_holder_yaw(True, s) for s in (1, -1)]
+    pushed = [_holder_yaw(False, s) for s in (1, -1)]
+    assert 0.33 < free[0] < 0.45 and -0.45 < free[1] < -0.33          # about +/-0.4 rad (docs/sim.md)
+    assert max(abs(v) for v in pushed) < 0.6 * min(abs(v) for v in free)
