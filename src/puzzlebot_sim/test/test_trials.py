@@ -31,6 +31,14 @@ def test_wiggle_releases_the_anchor():
     assert r["success"], r
 
 
+def test_edge_lock_holds_a_robot_tipped_over_the_edge():
+    # the front robot tips over the stage edge and rests there with its centre of mass beyond it: only the
+    # locked anchor (head risen into the opening's lock slot) keeps it from falling; the pilot behind holds
+    r = T.edge_lock_trial(0, hold_s=2.0)
+    assert r["success"] and r["head_locked"], r
+    assert r["front_beyond_edge_mm"] > 5.0 and r["front_pitch_rad"] > 0.2
+
+
 def test_speed_test_and_scripts_report_json(tmp_path):
     out = subprocess.run([sys.executable, os.path.join(SCRIPTS, "speed_test"), "--robots", "2",
                           "--sim-seconds", "0.5", "--json"], capture_output=True, text=True, check=True)

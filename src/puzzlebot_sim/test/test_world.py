@@ -10,7 +10,7 @@ from puzzlebot_common.geometry import wrap_angle
 from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_mpc.effects import ActuatorModel
 from puzzlebot_sim.coupling import HEAD_INSERTED
-from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.scenario_starts import starts_from_config
 from puzzlebot_sim.urdf import URDF_MARGIN, anchor_urdf, body_parts, robot_urdf
 from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld
@@ -166,6 +166,10 @@ def test_bad_setup_gives_clear_errors():
         SimParams.from_dict({"physics_rate": 250, "pose_rate": 100})
     with pytest.raises(ConfigError, match="anchor.backward_profile_mm: must start at 0 and increase"):
         AnchorParams.from_dict({"backward_profile_mm": [0.0, 2.0, 1.0], "backward_profile_n": [0.0, 0.1, 0.2]})
+    with pytest.raises(ConfigError, match="whole number of physics steps"):
+        SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)], anchor_rest=AnchorRestParams(check_period=0.0123))
+    with pytest.raises(ConfigError, match="anchor_rest.clearance: must be > 0"):
+        AnchorRestParams.from_dict({"clearance": -0.01})
     robots = parse_robot_list(["pz1", "pz2"])
     with pytest.raises(ConfigError, match="no start pose for robot pz2"):
         starts_from_config(robots, {"pz1": [0, 0, 0]})
@@ -173,3 +177,65 @@ def test_bad_setup_gives_clear_errors():
         starts_from_config(robots, {"pz1": [0, 0, 0], "pz2": [1, 0, 0], "pz7": [2, 0, 0]})
     with pytest.raises(ConfigError, match="three finite numbers"):
         starts_from_config(robots, {"pz1": [0, 0, 0], "pz2": [1, "a", 0]})
+
+
+def _pitch(world, name):
+    return pb.getEulerFromQuaternion(world.pose(name)[1])[1]
+
+
+def test_resting_anchor_is_frozen_follows_its_robot_and_wakes_when_approached():
+    rest_off = AnchorRestParams(enabled=False)
+    starts = [RobotStart("a", 0, 0, 0), RobotStart("o", -0.2, 0, 0)]
+    with SimWorld(RobotParams(), starts) as w, SimWorld(RobotParams(), starts, anchor_rest=rest_off) as ref:
+        w.run(1.0)
+        ref.run(1.0)
+        assert w.resting_anchors() == ["a", "o"] and ref.resting_anchors() == []
+        # the frozen anchor's weight stays on its robot: same posture as with the anchor simulated
+        assert _pitch(w, "a") == pytest.approx(_pitch(ref, "a"), abs=2e-4)
+        before = w.anchor_pose2d("a")
+        w.set_command("a", 0.0, 1.0)                 # a sudden turn wakes it (yaw-rate change > max_dw)
+        w.run(0.04)
+        assert "a" not in w.resting_anchors()
+        w.set_command("a", 0.0, 0.0)
+        w.run(1.0)
+        assert "a" in w.resting_anchors()            # at rest again after the disturbance
+        x, y, yaw = w.pose2d("a")
+        ax, ay, ayaw = w.anchor_pose2d("a")
+        local = (math.cos(yaw) * (ax - x) + math.sin(yaw) * (ay - y), wrap_angle(ayaw - yaw))
+        assert -0.02 < local[0] < -0.012 and abs(local[1]) < 0.05  # still in its holder
+        assert before != w.anchor_pose2d("a")
+        # the opening robot drives onto the frozen anchor: it wakes before contact and couples
+        w.set_command("o", 0.05, 0.0)
+        woke = None
+        for _ in range(80):
+            w.run(0.05)
+            if woke is None and "a" not in w.resting_anchors():
+                woke = w.time
+                gap = -0.025 - 0.0133 - (w.pose2d("o")[0] + 0.025)   # a's anchor tip to o's front face
+                assert gap > RobotParams().mouth_width
+            if [(p.anchor_robot, p.status) for p in w.physical_pairs()] == [("a", HEAD_INSERTED)]:
+                break
+        assert woke is not None
+        assert [(p.anchor_robot, p.opening_robot, p.status) for p in w.physical_pairs()] == [("a", "o", HEAD_INSERTED)]
+        w.reset_anchor("o", 0.2)                     # experiments may reset a frozen anchor
+        assert "o" not in w.resting_anchors()
+
+
+def _holder_yaw(pull, sign):
+    """Yaw of the anchor in its holder under a small torque, pulled out (pull) or pushed in."""
+    with SimWorld(RobotParams(), [RobotStart("a", 0, 0, 0)], anchor_rest=AnchorRestParams(enabled=False)) as w:
+        w.run(0.1)
+        body, c = w.robots["a"]["anchor"], w.client
+        for _ in range(300):
+            f = -0.02 if pull else 0.02                          # along the robot's x (it faces +x)
+            pb.applyExternalForce(body, -1, [f, 0, 0], w.anchor_pose("a")[0], pb.WORLD_FRAME, physicsClientId=c)
+            pb.applyExternalTorque(body, -1, [0, 0, sign * 3e-4], pb.WORLD_FRAME, physicsClientId=c)
+            w.step(1)
+        return wrap_angle(w.anchor_pose2d("a")[2] - w.pose2d("a")[2])
+
+
+def test_anchor_yaws_in_its_holder_and_is_squared_up_when_pushed_in():
+    free = [_holder_yaw(True, s) for s in (1, -1)]
+    pushed = [_holder_yaw(False, s) for s in (1, -1)]
+    assert 0.33 < free[0] < 0.45 and -0.45 < free[1] < -0.33          # about +/-0.4 rad (docs/sim.md)
+    assert max(abs(v) for v in pushed) < 0.6 * min(abs(v) for v in free)

@@ -7,6 +7,8 @@ three-bar linkage and its measured force profile.
 ``SimParams`` (config/sim.yaml, key ``sim``): stepping, solver, world and the
 injectable actuator/measurement effects.
 ``WorldParams`` (config/sim.yaml, key ``world``): dimensions of the worlds.
+``AnchorRestParams`` (config/sim.yaml, key ``anchor_rest``): when a resting
+anchor may be frozen to its robot (a speed shortcut, docs/sim.md).
 
 Frames: a robot's ``base_link`` is at the body centre, x forward, z up; the
 body's bottom is ``ground_clearance`` above the floor. The anchor frame is at
@@ -71,7 +73,7 @@ class RobotParams:
     holder_wall: float = 0.002       # m, retaining wall thickness
     holder_width: float = 0.0084     # m, pocket width (y): anchor base's lateral play +/-0.2 mm
     holder_height: float = 0.0082    # m, pocket height (z)
-    holder_slot_width: float = 0.0055  # m, slot in the retaining wall: the bar's yaw play
+    holder_slot_width: float = 0.0063  # m, slot in the retaining wall: the anchor's yaw play (+/-0.39 rad pulled out)
     holder_slot_height: float = 0.0045  # m: the bar rests on the slot's bottom (pitch play)
     # side connectors for rigid (bridge) coupling: knob on the left (+y), hole on the right (-y)
     knob_radius: float = 0.0045      # m
@@ -262,6 +264,8 @@ class SimParams:
     gui: bool = False
     seed: int = 0
     solver_iterations: int = 15      # Bullet constraint solver iterations per step
+    tilted_solver_iterations: int = 100  # ... while any robot is tilted by more than tilt_threshold (edges, hanging)
+    tilt_threshold: float = 0.15     # rad
     erp: float = 0.2                 # contact error reduction (per step)
     anchors: bool = True             # give every robot its soft anchor
     # injectable effects (off by default)
@@ -278,7 +282,8 @@ class SimParams:
 
     def check(self, where="sim"):
         require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "cmd_timeout", "sync_period",
-                                "sync_timeout", "sync_startup_timeout", "solver_iterations", "erp"], where)
+                                "sync_timeout", "sync_startup_timeout", "solver_iterations", "erp",
+                                "tilted_solver_iterations", "tilt_threshold"], where)
         if self.real_time_factor < 0:
             raise ConfigError("%s.real_time_factor: must be >= 0 (0 = as fast as possible)" % where)
         if self.physics_rate % self.pose_rate:
@@ -298,6 +303,40 @@ class SimParams:
             raise ConfigError("%s.wheel_imbalance: must be in (-1, 1), got %r" % (where, self.wheel_imbalance))
         if self.erp > 1.0:
             raise ConfigError("%s.erp: must be in (0, 1]" % where)
+
+
+@dataclass(frozen=True)
+class AnchorRestParams:
+    """Resting anchors (config/sim.yaml, ``anchor_rest``): a numerical shortcut, see docs/sim.md.
+
+    An anchor that has rested in its holder for ``settle_time`` while nothing
+    can touch it is frozen to its robot: its bodies leave the Bullet world,
+    its weight stays on the robot, and its pose follows the robot at the
+    pose where it rested. It is put back (woken) as soon as another robot or
+    anchor comes within ``clearance`` of it, the robot tilts, the terrain
+    under it changes, or the robot's velocity changes by more than
+    ``max_dv`` / ``max_dw`` within one ``check_period``. Interacting anchors
+    (coupling, pull-outs, wiggles, edges) are therefore always simulated in
+    full; a resting one costs almost nothing.
+    """
+
+    enabled: bool = True             # freeze resting anchors (false: every anchor is always simulated)
+    clearance: float = 0.02          # m, nearest other robot or anchor that keeps an anchor awake
+    settle_time: float = 0.25        # s, time at rest in the holder before an anchor is frozen
+    check_period: float = 0.02       # s, period of the rest/wake tests (a whole number of physics steps)
+    max_dv: float = 0.02             # m/s, robot velocity change within one check period that wakes it
+    max_dw: float = 0.3              # rad/s, robot yaw-rate change within one check period that wakes it
+    max_tilt: float = 0.05           # rad, robot tilt from level above which anchors stay awake
+    max_rel_speed: float = 0.002     # m/s, anchor speed relative to its robot counted as rest
+    max_rel_rate: float = 0.05       # rad/s, anchor (and joint) angular rate relative to its robot counted as rest
+    max_joint_angle: float = 0.02    # rad, neck and barbs this close to straight/rest count as rest
+
+    @classmethod
+    def from_dict(cls, data, where="anchor_rest"):
+        return from_mapping(cls, data, where)
+
+    def check(self, where="anchor_rest"):
+        require_positive(self, [f.name for f in fields(self) if f.name != "enabled"], where)
 
 
 @dataclass(frozen=True)

@@ -16,20 +16,32 @@ import time
 from dataclasses import replace
 
 import numpy as np
+import pybullet as pb
 
 from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
-from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.world import RobotStart, SimWorld
 
 #: Control period of the scripted drivers [s] (the MPC's rate).
 CONTROL_DT = 0.05
 #: Gap left between mated robots at a coupled start [m] (start-pose tolerance is 1 mm).
 MATE_GAP = 0.0003
+#: edge_lock_trial(stop="edge"): the back robot stops with its front this far from the edge [m].
+EDGE_STOP = 0.004
+#: chain_step_trial: the first robot starts with its leading face this far from the edge [m] ...
+CHAIN_START_GAP = 0.005
+#: ... plus, backing off, the free anchor sticking out of its back [m].
+ANCHOR_OUT = 0.018
+#: A robot counts as upright on the floor within these tolerances [m, rad].
+UPRIGHT_HEIGHT_TOLERANCE = 0.01
+UPRIGHT_TILT = 0.3
 
 
-def _world(starts, sim, robot, anchor, world="flat", world_params=None):
+def _world(starts, sim, robot, anchor, world="flat", world_params=None, anchor_rest=AnchorRestParams()):
     return SimWorld(robot, starts, world=world, physics_rate=sim.physics_rate, anchor_params=anchor,
-                    world_params=world_params, solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed)
+                    world_params=world_params, solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed,
+                    anchor_rest=anchor_rest, tilted_solver_iterations=sim.tilted_solver_iterations,
+                    tilt_threshold=sim.tilt_threshold)
 
 
 def _status(w, anchor_robot, opening_robot):
@@ -45,7 +57,7 @@ def _mated_pair(rng, robot, lateral=0.0003, yaw=0.01):
     return [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(robot.body_side + MATE_GAP), dy, dyaw)]
 
 
-def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, yaw=0.02, anchor_yaw=0.3,
+def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, yaw=0.02, anchor_yaw=0.39,
                    timeout=5.0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
     """One robot drives at ``speed`` into the other's opening from an aligned start.
 
@@ -116,85 +128,133 @@ def wiggle_trial(seed, v_bias=0.02, w_max=3.0, period=2.0, timeout=20.0, sim=Sim
         return {"trial": "wiggle", "seed": seed, "success": False, "time_s": None}
 
 
-def _drive_chain_off_edge(w, names, speed, edge_x, body_side, hold_s):
-    """All robots drive forward; each stops when its front reaches the edge (the
-    ones that went over keep driving). Returns after ``hold_s`` s more."""
-    for n in names:
-        w.set_command(n, speed, 0.0)
-    t_end = None
-    while True:
-        w.run(CONTROL_DT)
-        last = names[-1]
-        if t_end is None and w.pose2d(last)[0] + body_side / 2 >= edge_x - 0.004:
-            for n in names:
-                w.set_command(n, 0.0, 0.0)
-            t_end = w.time
-        if t_end is not None and w.time - t_end >= hold_s:
-            return
+def _pitch(w, name):
+    """Pitch of a robot [rad], > 0 nose down."""
+    return pb.getEulerFromQuaternion(w.pose(name)[1])[1]
 
 
-def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, sim=SimParams(), robot=RobotParams(),
-                    anchor=AnchorParams()):
-    """A coupled pair on a stage drives forward until the front (anchor) robot
-    goes over the edge; the back robot stops at the edge.
+def _upright_on_floor(w, name, robot):
+    roll, pitch, _ = pb.getEulerFromQuaternion(w.pose(name)[1])
+    return (w.pose(name)[0][2] < robot.body_centre_height + UPRIGHT_HEIGHT_TOLERANCE
+            and abs(roll) < UPRIGHT_TILT and abs(pitch) < UPRIGHT_TILT)
 
-    Success: after ``hold_s`` s the front robot is below the stage top, the back
-    robot is still on the stage and the anchor is still in its opening.
-    Seeded perturbation: the mated start.
+
+def _head_locked(w, anchor_robot, opening_robot, robot, anchor):
+    """True when the anchor's head has risen above the slits' ceiling (into the lock slot)."""
+    inv = pb.invertTransform(*w.pose(opening_robot))
+    head = pb.multiplyTransforms(*inv, w.anchor_points(anchor_robot)[0], [0, 0, 0, 1])[0]
+    return head[2] + anchor.head_height / 2 > robot.opening_z + robot.mouth_height / 2
+
+
+def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip", tip_angle=0.15,
+                    holder_pilot=True, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+    """A coupled pair on a stage drives forward until the front (anchor) robot ``a``
+    goes over the edge; the back robot ``o`` holds it.
+
+    ``stop="tip"``: both stop as soon as ``a`` tips (pitch > ``tip_angle``): ``a``
+    ends over the edge, its centre of mass beyond it, held by the locked anchor
+    (the edge lock). ``stop="edge"``: they drive on until ``o``'s front is 4 mm
+    from the edge: ``a`` falls and hangs. ``holder_pilot``: ``o`` is a pilot
+    (four driven wheels; a non-pilot's load goes onto its frictionless front
+    caster and it is dragged). Seeded perturbation: the mated start.
+
+    Success: ``a`` and ``o`` are never decoupled (checked every control period
+    from the start to the end), after ``hold_s`` s ``a`` is over the edge
+    (``stop="tip"``: centre beyond the edge and tipped; ``"edge"``: below the
+    stage top) and ``o`` is still on the stage (centre behind the edge, level).
     """
     rng = np.random.default_rng(seed)
     wp = WorldParams(stage_height=stage_height)
     starts = [replace(s, x=s.x - 0.03) for s in _mated_pair(rng, robot)]
+    starts[1] = replace(starts[1], pilot=holder_pilot)
     with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
         w.run(0.2)
-        _drive_chain_off_edge(w, ["a", "o"], speed, wp.edge_x, robot.body_side, hold_s)
-        za, zo = w.pose("a")[0][2], w.pose("o")[0][2]
-        status = _status(w, "a", "o")
-        return {"trial": "edge_lock", "seed": seed, "stage_height": stage_height,
-                "success": bool(za < stage_height and zo > stage_height and status != DECOUPLED),
-                "front_z_mm": round(1e3 * za, 1), "back_z_mm": round(1e3 * zo, 1), "status": status}
+        for n in ("a", "o"):
+            w.set_command(n, speed, 0.0)
+        t_end, decoupled_at = None, None
+        while t_end is None or w.time - t_end < hold_s:
+            w.run(CONTROL_DT)
+            if decoupled_at is None and _status(w, "a", "o") == DECOUPLED:
+                decoupled_at = round(w.time, 2)
+            if t_end is None and (_pitch(w, "a") > tip_angle if stop == "tip" else
+                                  w.pose2d("o")[0] + robot.body_side / 2 >= wp.edge_x - EDGE_STOP):
+                for n in ("a", "o"):
+                    w.set_command(n, 0.0, 0.0)
+                t_end = w.time
+        (xa, _, za), (xo, _, zo) = w.pose("a")[0], w.pose("o")[0]
+        over = (xa > wp.edge_x and _pitch(w, "a") > tip_angle) if stop == "tip" else za < stage_height
+        held = xo < wp.edge_x and zo > stage_height and abs(_pitch(w, "o")) < UPRIGHT_TILT
+        return {"trial": "edge_lock", "seed": seed, "stop": stop, "holder_pilot": holder_pilot,
+                "success": bool(decoupled_at is None and over and held), "decoupled_at_s": decoupled_at,
+                "front_pitch_rad": round(_pitch(w, "a"), 2), "front_beyond_edge_mm": round(1e3 * (xa - wp.edge_x), 1),
+                "front_z_mm": round(1e3 * za, 1), "back_x_mm": round(1e3 * (xo - wp.edge_x), 1),
+                "head_locked": _head_locked(w, "a", "o", robot, anchor), "status": _status(w, "a", "o")}
 
 
-def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=20.0, sim=SimParams(),
-                     robot=RobotParams(), anchor=AnchorParams()):
-    """A chain of ``n`` coupled robots drives forward off the stage edge onto the floor.
+def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, direction="backward", pilot=None,
+                     floor_speed=0.01, tip_angle=0.2, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+    """A chain of ``n`` coupled robots goes down the stage edge onto the floor.
 
-    Success: every robot ends on the floor (body centre below the stage top)
-    within ``timeout``. Reports how many pairs are still coupled at the end.
-    Seeded perturbation: small lateral/yaw offsets of each follower.
+    Chain ``r1`` .. ``rN``: ``r(k)``'s anchor sits in ``r(k+1)``'s opening (all
+    facing the same way). ``direction="forward"``: the chain faces the edge and
+    drives forward (``r1`` goes over first, nose first; every anchor robot drops
+    below its opening robot, so every lock engages). ``"backward"``: the chain
+    faces away from the edge and backs off it (``rN`` goes first, back first,
+    and ladders down the stage face; a robot on the floor keeps driving and
+    pulls the next one down); once the last robot tips over the edge (pitch
+    beyond ``tip_angle``) the others slow to ``floor_speed`` (its anchor sits
+    above the opening it is in, so that pair is held by the barbs only). ``pilot``: index
+    (0-based) of the pilot in the chain, -1 for none; default: the robot that
+    goes down first.
+
+    Success: within ``timeout`` every robot stands upright on the floor and no
+    pair was ever decoupled. Seeded perturbation: small lateral offsets.
     """
     rng = np.random.default_rng(seed)
     names = ["r%d" % (i + 1) for i in range(n)]
-    starts, x = [], -0.03
-    for i, name in enumerate(names):
-        dy = rng.uniform(-0.0003, 0.0003) if i else 0.0
-        starts.append(RobotStart(name, x, dy, 0.0))
-        x -= robot.body_side + MATE_GAP
+    backward = direction == "backward"
+    if pilot is None:
+        pilot = n - 1 if backward else 0
+    yaw = math.pi if backward else 0.0
+    step = robot.body_side + MATE_GAP
+    # the robot nearest the edge starts with its leading face (plus anchor) 5 mm from it
+    lead = -(robot.body_side / 2 + CHAIN_START_GAP + (ANCHOR_OUT if backward else 0.0))
+    xs = [lead - (n - 1 - i) * step for i in range(n)] if backward else [lead - i * step for i in range(n)]
+    starts = [RobotStart(nm, xs[i], rng.uniform(-0.0003, 0.0003) if i else 0.0, yaw, pilot=(i == pilot))
+              for i, nm in enumerate(names)]
     wp = WorldParams(stage_height=stage_height)
+    v = -speed if backward else speed
     with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
         w.run(0.2)
-        for name in names:
-            w.set_command(name, speed, 0.0)
-        t0 = w.time
+        t0, decoupled, slow = w.time, set(), False
+        for nm in names:
+            w.set_command(nm, v, 0.0)
         while w.time - t0 < timeout:
+            if backward and not slow and abs(_pitch(w, names[0])) > tip_angle:
+                slow = True                    # the last robot tips over the edge: the others only creep
+                for nm in names[1:]:
+                    w.set_command(nm, -floor_speed, 0.0)
             w.run(CONTROL_DT)
-            if all(w.pose(nm)[0][2] < stage_height for nm in names):
+            decoupled |= {i for i in range(n - 1) if _status(w, names[i], names[i + 1]) == DECOUPLED}
+            if all(_upright_on_floor(w, nm, robot) for nm in names):
                 break
-        down = [w.pose(nm)[0][2] < stage_height for nm in names]
-        coupled = sum(_status(w, names[i], names[i + 1]) != DECOUPLED for i in range(n - 1))
-        return {"trial": "chain_step", "seed": seed, "robots": n, "success": all(down),
-                "on_floor": sum(down), "pairs_still_coupled": coupled,
+        down = [_upright_on_floor(w, nm, robot) for nm in names]
+        return {"trial": "chain_step", "seed": seed, "robots": n, "direction": direction, "pilot": pilot,
+                "success": bool(all(down) and not decoupled), "upright_on_floor": sum(down),
+                "pairs_ever_decoupled": len(decoupled),
                 "time_s": round(w.time - t0, 2) if all(down) else None}
 
 
-def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams(),
+               anchor_rest=AnchorRestParams()):
     """Wall-clock speed of a headless world of ``robots`` robots with anchors.
 
     Layout on a grid 0.2 m apart: half of the robots (rounded up to a pair)
     stand in coupled pairs, the others alone; every robot drives (v = 0.03
     m/s, gentle seeded turns), so every anchor rides in its holder and the
     coupled ones carry load. Returns robots, sim_seconds, wall_seconds,
-    real_time_factor (sim / wall) and cpu_seconds.
+    real_time_factor (sim / wall), cpu_seconds, the coupled pairs and the
+    anchors frozen at rest (``anchor_rest``) at the end.
     """
     rng = np.random.default_rng(seed)
     coupled = min(robots, 2 * int(math.ceil(robots / 4.0)))
@@ -206,7 +266,7 @@ def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams()
         starts.append(RobotStart("r%d" % len(starts), cx, cy, 0.0))
         if k < coupled // 2:
             starts.append(RobotStart("r%d" % len(starts), cx - robot.body_side - MATE_GAP, cy, 0.0))
-    w = _world(starts, replace(sim, seed=seed), robot, anchor)
+    w = _world(starts, replace(sim, seed=seed), robot, anchor, anchor_rest=anchor_rest)
     try:
         turns = {s.name: rng.uniform(-0.3, 0.3) for s in starts}
         for s in starts:
@@ -215,11 +275,12 @@ def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams()
         w.run(sim_seconds)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
         pairs = len(w.physical_pairs())
+        resting = len(w.resting_anchors())
     finally:
         w.close()
     return {"robots": robots, "sim_seconds": sim_seconds, "wall_seconds": round(wall, 4),
             "real_time_factor": round(sim_seconds / wall, 2), "cpu_seconds": round(cpu, 4),
-            "coupled_pairs_at_end": pairs}
+            "coupled_pairs_at_end": pairs, "resting_anchors_at_end": resting}
 
 
 def summarize(results):

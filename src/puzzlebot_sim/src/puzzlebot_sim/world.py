@@ -33,7 +33,7 @@ from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
 from puzzlebot_common.kinematics import wheel_speeds
 from puzzlebot_sim import coupling
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
-from puzzlebot_sim.params import AnchorParams, WorldParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, WorldParams
 from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
                                 robot_urdf)
 from puzzlebot_sim.worlds import WORLDS
@@ -47,6 +47,12 @@ _MASKS = {GROUP_TERRAIN: GROUP_TERRAIN | GROUP_BODY | GROUP_WHEEL | GROUP_ANCHOR
 
 #: An anchor's joint motors are re-set when a joint moved by more than this [rad].
 ANCHOR_UPDATE_RAD = 0.002
+
+#: Largest yaw of an anchor in its holder assumed by the resting-anchor tests [rad] (about +/-0.5 rad).
+ANCHOR_MAX_YAW = 0.6
+
+#: Gravitational acceleration [m/s^2].
+GRAVITY = 9.81
 
 #: Tolerances of the start-pose check for robots placed coupled [m, rad].
 MATE_POSITION_TOLERANCE = 0.001
@@ -137,6 +143,19 @@ def check_start_poses(starts, body_side, anchor_reach=0.0, anchor_half_width=0.0
                                       % (p.name, q.name, q.name, p.name, 1e3 * anchor_reach))
 
 
+def _obb_overlap(a, b, grow):
+    """True when oriented rectangle ``a`` grown by ``grow`` [m] overlaps rectangle ``b``.
+
+    Rectangles are (centre x, centre y, cos yaw, sin yaw, half length, half width)."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    for ux, uy in ((a[2], a[3]), (-a[3], a[2]), (b[2], b[3]), (-b[3], b[2])):
+        ra = (a[4] + grow) * abs(a[2] * ux + a[3] * uy) + (a[5] + grow) * abs(-a[3] * ux + a[2] * uy)
+        rb = b[4] * abs(b[2] * ux + b[3] * uy) + b[5] * abs(-b[3] * ux + b[2] * uy)
+        if abs(dx * ux + dy * uy) > ra + rb:
+            return False
+    return True
+
+
 # -------------------------------------------------------------------- world
 class SimWorld:
     """PuzzleBots (and their anchors) in a Bullet world. Commands are body velocities (v, w).
@@ -148,12 +167,17 @@ class SimWorld:
     ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
     puzzlebot_mpc.effects.ActuatorModel applied to every robot's commands,
     None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
-    ``mocap`` (MocapModel).
+    ``mocap`` (MocapModel), ``anchor_rest`` (AnchorRestParams: when resting
+    anchors are frozen to their robot; off with the GUI, which would not show them),
+    ``tilted_solver_iterations`` (solver iterations while any robot is tilted by more
+    than ``tilt_threshold`` rad: robots falling over an edge or hanging load the light
+    anchor links with large impulses, which the solver needs more iterations for).
     """
 
     def __init__(self, robot_params, starts, world="flat", physics_rate=200, gui=False, *,
                  anchor_params=AnchorParams(), world_params=None, solver_iterations=15, erp=0.2, seed=0,
-                 actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel()):
+                 actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel(),
+                 anchor_rest=AnchorRestParams(), tilted_solver_iterations=100, tilt_threshold=0.15):
         if world not in WORLDS:
             raise ConfigError("unknown world %r; known worlds: %s" % (world, ", ".join(sorted(WORLDS))))
         if not starts:
@@ -188,12 +212,30 @@ class SimWorld:
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         c = self.client
         pb.resetSimulation(physicsClientId=c)
-        pb.setGravity(0, 0, -9.81, physicsClientId=c)
+        pb.setGravity(0, 0, -GRAVITY, physicsClientId=c)
         pb.setTimeStep(self.dt, physicsClientId=c)
         pb.setRealTimeSimulation(0, physicsClientId=c)
         pb.setPhysicsEngineParameter(numSolverIterations=solver_iterations, erp=erp, contactERP=erp,
                                      frictionERP=erp, deterministicOverlappingPairs=1, enableConeFriction=0,
                                      physicsClientId=c)
+        self._solver_iterations = (solver_iterations, max(solver_iterations, tilted_solver_iterations))
+        self._cos_tilt = math.cos(tilt_threshold)
+        self._tilted = False
+        self._monitor_steps = int(round(anchor_rest.check_period / self.dt))
+        if self._monitor_steps < 1 or abs(self._monitor_steps * self.dt - anchor_rest.check_period) > 1e-9:
+            raise ConfigError("anchor_rest.check_period (%g s) must be a whole number of physics steps (%g s)"
+                              % (anchor_rest.check_period, self.dt))
+        self._rest = None
+        if anchor_params is not None and anchor_rest.enabled and not gui:
+            self._rest = anchor_rest
+            self._anchor_mass = anchor_params.mass
+            self._exposed = self._exposed_anchor_box(robot_params, anchor_params)
+        if self._rest is not None:
+            box = self._exposed
+            half = ((box[1] - box[0]) / 2.0, box[2])
+            self._zone_radius = max(math.hypot(robot_params.body_side / 2, robot_params.body_side / 2),
+                                    abs(box[0] + box[1]) / 2.0 + math.hypot(*half))
+            self._box_radius = math.hypot(*half)
         self._tmp = tempfile.TemporaryDirectory(prefix="puzzlebot_urdf_")
         self.terrain = WORLDS[world](c, self.world_params)
         self.static_bodies = self.terrain.bodies
@@ -208,6 +250,7 @@ class SimWorld:
         for s in starts:
             self.robots[s.name] = self._spawn(s)
             self._cmd[s.name] = (0.0, 0.0)
+            self._driven[s.name] = (0.0, 0.0)
             self._plants[s.name] = self._make_plant()
         self.names = names
 
@@ -260,20 +303,24 @@ class SimWorld:
                                   rollingFriction=0.0, physicsClientId=c)
                 self._set_group(body, links[name], GROUP_WHEEL)
         robot = {"body": body, "wheels": wheels, "n_left": n_left, "pilot": s.pilot, "anchor": None,
-                 "wheel_targets": None, "anchor_q": None}
+                 "wheel_targets": None, "anchor_q": None, "anchor_state": None,
+                 "rest": None, "calm_since": None, "last_velocity": None}
         if self.anchor_params is not None:
             robot["anchor"] = self._spawn_anchor(s, z0)
         return robot
 
     def _spawn_anchor(self, s, z0):
-        c, p, a = self.client, self.params, self.anchor_params
-        path = self._urdf("anchor", lambda: anchor_urdf(a))
+        p = self.params
         cy, sy = math.cos(s.yaw), math.sin(s.yaw)
         x = s.x + cy * self._anchor_home_x
         y = s.y + sy * self._anchor_home_x
         z = z0 + p.body_centre_height + p.opening_z + 1e-4
-        body = pb.loadURDF(path, [x, y, z], pb.getQuaternionFromEuler([0, 0, s.yaw]),
-                           flags=URDF_FLAGS, physicsClientId=c)
+        return self._load_anchor([x, y, z], pb.getQuaternionFromEuler([0, 0, s.yaw]))
+
+    def _load_anchor(self, position, orientation):
+        c, a = self.client, self.anchor_params
+        path = self._urdf("anchor", lambda: anchor_urdf(a))
+        body = pb.loadURDF(path, position, orientation, flags=URDF_FLAGS, physicsClientId=c)
         for link in range(-1, pb.getNumJoints(body, physicsClientId=c)):
             pb.changeDynamics(body, link, lateralFriction=a.barb_friction if link > 0 else a.friction,
                               physicsClientId=c)
@@ -286,9 +333,12 @@ class SimWorld:
     def reset_anchor(self, name, yaw=0.0):
         """Put ``name``'s anchor back in its holder (pushed in, barbs at rest), turned by
         ``yaw`` [rad] relative to the robot (experiments: the anchor's free yaw)."""
+        if self.robots[name]["rest"] is not None:
+            self._wake(name)
         c, body = self.client, self.robots[name]["anchor"]
         if body is None:
             return
+        self.robots[name]["calm_since"] = None
         rx, ry, ryaw = self.pose2d(name)
         z = self.pose(name)[0][2] + self.params.opening_z
         x = rx + math.cos(ryaw) * self._anchor_home_x
@@ -321,6 +371,8 @@ class SimWorld:
             self._apply_controls()
             pb.stepSimulation(physicsClientId=self.client)
             self.steps += 1
+            if self.steps % self._monitor_steps == 0:
+                self._monitor()
 
     def run(self, seconds):
         """Advance by ``seconds`` of simulated time (rounded to whole steps)."""
@@ -332,7 +384,12 @@ class SimWorld:
         w_max, radius, torque = p.wheel_max_speed, p.wheel_radius, p.wheel_max_torque
         for name, robot in self.robots.items():
             plant = self._plants[name]
-            v, w = plant.advance(t, self.dt) if plant is not None else self._cmd[name]
+            if plant is not None:
+                v, w = plant.advance(t, self.dt)
+            else:
+                v, w = self._cmd[name]
+                if robot["wheel_targets"] is not None and self._driven[name] == (v, w):
+                    continue                              # same command: the motors keep their setting
             self._driven[name] = (v, w)
             vl, vr = wheel_speeds(v, w, p.wheel_base)
             wl = max(-w_max, min(w_max, (1.0 - k) * vl / radius))
@@ -346,6 +403,12 @@ class SimWorld:
                                              physicsClientId=c)
         if self.anchor_params is not None:
             self._apply_anchor_torques()
+        if self._rest is not None:
+            for robot in self.robots.values():
+                rest = robot["rest"]
+                if rest is not None:        # a frozen anchor's weight stays on its robot
+                    pb.applyExternalForce(robot["body"], -1, rest["weight"], rest["com"], pb.LINK_FRAME,
+                                          physicsClientId=c)
 
     def _apply_anchor_torques(self):
         """Barb torque limits from the profile at the current angles (see puzzlebot_sim.anchor).
@@ -358,7 +421,10 @@ class SimWorld:
         joints = [0, 1, 2]
         for robot in self.robots.values():
             body = robot["anchor"]
+            if body is None:
+                continue
             states = pb.getJointStates(body, joints, physicsClientId=c)
+            robot["anchor_state"] = states
             q = (states[0][0], states[1][0], states[2][0])
             last = robot["anchor_q"]
             if last is not None and max(abs(q[0] - last[0]), abs(q[1] - last[1]), abs(q[2] - last[2])) \
@@ -374,6 +440,157 @@ class SimWorld:
     def time(self):
         """Simulated time since the start [s]."""
         return self.steps * self.dt
+
+    # ------------------------------------------------------- resting anchors
+    def resting_anchors(self):
+        """Names of the robots whose anchor is frozen at rest (see AnchorRestParams)."""
+        return [n for n in self.names if self.robots[n]["rest"] is not None]
+
+    def _exposed_anchor_box(self, p, a):
+        """Where the anchor can be outside its robot's back face, in the robot's frame:
+        (x0, x1, half width) [m], for any travel in the holder, any barb angle and a yaw
+        of up to ANCHOR_MAX_YAW."""
+        h = p.body_side / 2.0
+        travel = p.holder_depth - p.holder_wall - 2 * a.base_radius
+        tip_out = -h - (self._anchor_home_x - travel - a.length)          # head tip pulled out
+        reach = tip_out + a.barb_length + a.barb_tip_radius                # + a barb flipped backward
+        lever = reach + h + (self._anchor_home_x - travel)                 # ball centre to the far end
+        half_width = lever * math.sin(ANCHOR_MAX_YAW) + AnchorGeometry(a).hinge[1] + a.barb_length + a.barb_tip_radius
+        return (-h - reach, -h, half_width)
+
+    def _zones(self, poses):
+        """Per robot: its body and its exposed anchor box as (centre, c, s, half x, half y) in the world."""
+        h = self.params.body_side / 2.0
+        x0, x1, hw = self._exposed
+        zones = {}
+        for name in self.names:
+            (x, y, _), orn = poses[name]
+            yaw = yaw_from_quaternion(*orn)
+            c, s = math.cos(yaw), math.sin(yaw)
+            ax = (x0 + x1) / 2.0
+            zones[name] = ((x, y, c, s, h, h), (x + c * ax, y + s * ax, c, s, (x1 - x0) / 2.0, hw))
+        return zones
+
+    def _anchor_clear(self, name, zones, poses):
+        """True when no other robot or anchor is within the clearance of ``name``'s anchor,
+        the robot is level and the terrain under the anchor is the robot's."""
+        rest = self._rest
+        box = zones[name][1]
+        grow = rest.clearance
+        far = self._zone_radius + self._box_radius + grow
+        for other in self.names:
+            if other == name:
+                continue
+            body, anchor = zones[other]
+            if (body[0] - box[0]) ** 2 + (body[1] - box[1]) ** 2 > far * far:
+                continue                                  # too far for its body or anchor to matter
+            if _obb_overlap(box, body, grow) or _obb_overlap(box, anchor, grow):
+                return False
+        (x, y, z), orn = poses[name]
+        if 1.0 - 2.0 * (orn[0] ** 2 + orn[1] ** 2) < math.cos(rest.max_tilt):
+            return False                                  # tilted: the anchor may slide or hang
+        ground = self.terrain.height(x, y)
+        if abs(z - ground - self.params.body_centre_height) > self.params.ground_clearance:
+            return False                                  # lifted or falling
+        cx, cy, c, s, hx, hy = box
+        for dx, dy in ((0, 0), (-1, -1), (-1, 1), (1, -1), (1, 1)):
+            px, py = dx * (hx + grow), dy * (hy + grow)
+            if self.terrain.height(cx + c * px - s * py, cy + s * px + c * py) != ground:
+                return False                              # an edge or a step under the anchor
+        return True
+
+    def _anchor_calm(self, robot, position, lin, ang):
+        """True when the awake anchor rests in its holder: joints near rest, no motion relative to the robot."""
+        rest, states = self._rest, robot["anchor_state"]
+        if states is None:
+            return False
+        if any(abs(st[0]) > rest.max_joint_angle or abs(st[1]) > rest.max_rel_rate for st in states):
+            return False
+        c = self.client
+        a_pos = pb.getBasePositionAndOrientation(robot["anchor"], physicsClientId=c)[0]
+        a_lin, a_ang = pb.getBaseVelocity(robot["anchor"], physicsClientId=c)
+        r = [a_pos[k] - position[k] for k in range(3)]
+        carried = [lin[0] + ang[1] * r[2] - ang[2] * r[1], lin[1] + ang[2] * r[0] - ang[0] * r[2],
+                   lin[2] + ang[0] * r[1] - ang[1] * r[0]]
+        return (math.dist(a_lin, carried) <= rest.max_rel_speed
+                and math.dist(a_ang, ang) <= rest.max_rel_rate)
+
+    def _monitor(self):
+        """Every check period: solver iterations for tilted robots, resting anchors."""
+        poses = {n: self.pose(n) for n in self.names}
+        tilted = any(1.0 - 2.0 * (orn[0] ** 2 + orn[1] ** 2) < self._cos_tilt for _, orn in poses.values())
+        if tilted != self._tilted:
+            self._tilted = tilted
+            pb.setPhysicsEngineParameter(numSolverIterations=self._solver_iterations[tilted],
+                                         physicsClientId=self.client)
+        if self._rest is not None:
+            self._update_rest(poses)
+
+    def _update_rest(self, poses):
+        """Freeze anchors that rest with nothing near; wake frozen ones that something may disturb."""
+        c, rest = self.client, self._rest
+        zones = self._zones(poses)
+        for name in self.names:
+            robot = self.robots[name]
+            lin, ang = pb.getBaseVelocity(robot["body"], physicsClientId=c)
+            last, robot["last_velocity"] = robot["last_velocity"], (lin, ang)
+            steady = (last is not None and math.dist(lin, last[0]) <= rest.max_dv
+                      and abs(ang[2] - last[1][2]) <= rest.max_dw)
+            quiet = steady and self._anchor_clear(name, zones, poses)
+            if robot["rest"] is not None:
+                if not quiet:
+                    self._wake(name)
+            elif quiet and robot["anchor"] is not None and self._anchor_calm(robot, poses[name][0], lin, ang):
+                if robot["calm_since"] is None:
+                    robot["calm_since"] = self.time
+                elif self.time - robot["calm_since"] >= rest.settle_time - 1e-9:
+                    self._freeze(name, poses[name])
+            else:
+                robot["calm_since"] = None
+
+    def _freeze(self, name, pose):
+        """Take ``name``'s resting anchor out of the Bullet world; it follows the robot from now on."""
+        c, a, robot = self.client, self.anchor_params, self.robots[name]
+        body = robot["anchor"]
+        inv_pos, inv_orn = pb.invertTransform(*pose, physicsClientId=c)
+
+        def local(position, orientation=(0, 0, 0, 1)):
+            return pb.multiplyTransforms(inv_pos, inv_orn, position, orientation, physicsClientId=c)
+        base = pb.getBasePositionAndOrientation(body, physicsClientId=c)
+        links = pb.getLinkStates(body, [0, 1, 2], physicsClientId=c)
+        masses = [a.base_mass, a.head_mass, a.barb_mass, a.barb_mass]
+        centres = [base[0]] + [st[0] for st in links]
+        com = [sum(m * p[k] for m, p in zip(masses, centres)) / sum(masses) for k in range(3)]
+        head, tips = self._anchor_points_of(body)
+        gravity_local = local([0, 0, -GRAVITY * self._anchor_mass])[0]
+        origin_local = local([0, 0, 0])[0]
+        robot["rest"] = {"base": local(*base), "q": self.anchor_joints(name),
+                         "points": [local(q)[0] for q in [head] + list(tips)],
+                         "com": local(com)[0],
+                         "weight": [gravity_local[k] - origin_local[k] for k in range(3)]}
+        pb.removeBody(body, physicsClientId=c)
+        robot["anchor"] = None
+        robot["anchor_state"] = None
+        robot["calm_since"] = None
+
+    def _wake(self, name):
+        """Put ``name``'s frozen anchor back into the Bullet world where it rested, moving with the robot."""
+        c, robot = self.client, self.robots[name]
+        rest = robot["rest"]
+        pos, orn = self.pose(name)
+        a_pos, a_orn = pb.multiplyTransforms(pos, orn, *rest["base"], physicsClientId=c)
+        body = self._load_anchor(a_pos, a_orn)
+        lin, ang = pb.getBaseVelocity(robot["body"], physicsClientId=c)
+        r = [a_pos[k] - pos[k] for k in range(3)]
+        carried = [lin[0] + ang[1] * r[2] - ang[2] * r[1], lin[1] + ang[2] * r[0] - ang[0] * r[2],
+                   lin[2] + ang[0] * r[1] - ang[1] * r[0]]
+        pb.resetBaseVelocity(body, carried, ang, physicsClientId=c)
+        for j, q in enumerate(rest["q"]):
+            pb.resetJointState(body, j, q, 0.0, physicsClientId=c)
+        robot["anchor"] = body
+        robot["rest"] = None
+        robot["anchor_q"] = None
+        robot["calm_since"] = None
 
     # ------------------------------------------------------------- readouts
     def pose(self, name):
@@ -393,10 +610,12 @@ class SimWorld:
 
     def anchor_pose(self, name):
         """(position xyz, quaternion xyzw) of the robot's anchor base, or None without anchors."""
-        body = self.robots[name]["anchor"]
-        if body is None:
+        robot = self.robots[name]
+        if robot["rest"] is not None:
+            return pb.multiplyTransforms(*self.pose(name), *robot["rest"]["base"], physicsClientId=self.client)
+        if robot["anchor"] is None:
             return None
-        return pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
+        return pb.getBasePositionAndOrientation(robot["anchor"], physicsClientId=self.client)
 
     def anchor_pose2d(self, name):
         pose = self.anchor_pose(name)
@@ -407,13 +626,25 @@ class SimWorld:
 
     def anchor_joints(self, name):
         """(neck, left barb, right barb) joint angles [rad]; barb 0 = rest, > 0 flared, < 0 folded."""
+        rest = self.robots[name]["rest"]
+        if rest is not None:
+            return rest["q"]
         body = self.robots[name]["anchor"]
         states = pb.getJointStates(body, [0, 1, 2], physicsClientId=self.client)
         return tuple(s[0] for s in states)
 
     def anchor_points(self, name):
         """World positions of the anchor's head tip and its two barb tips (centres)."""
-        body, a = self.robots[name]["anchor"], self.anchor_params
+        rest = self.robots[name]["rest"]
+        if rest is not None:
+            pos, orn = self.pose(name)
+            world = [pb.multiplyTransforms(pos, orn, q, [0, 0, 0, 1], physicsClientId=self.client)[0]
+                     for q in rest["points"]]
+            return world[0], world[1:]
+        return self._anchor_points_of(self.robots[name]["anchor"])
+
+    def _anchor_points_of(self, body):
+        a = self.anchor_params
         states = pb.getLinkStates(body, [0, 1, 2], physicsClientId=self.client)
         head_pos, head_orn = states[0][4], states[0][5]
         head_tip = pb.multiplyTransforms(head_pos, head_orn, [-(a.length - a.neck_x), 0, 0], [0, 0, 0, 1],
@@ -481,14 +712,15 @@ class SimWorld:
     # ------------------------------------------------------------ lifecycle
     @classmethod
     def from_params(cls, sim, robot_params, starts, anchor_params=AnchorParams(), world_params=None,
-                    actuator_model=None, gui=None):
+                    actuator_model=None, gui=None, anchor_rest=AnchorRestParams()):
         """A world configured from the sim node's parameter sets (SimParams, ...)."""
         return cls(robot_params, starts, world=sim.world, physics_rate=sim.physics_rate,
                    gui=sim.gui if gui is None else gui,
                    anchor_params=anchor_params if sim.anchors else None, world_params=world_params,
                    solver_iterations=sim.solver_iterations, erp=sim.erp, seed=sim.seed,
                    actuator_model=actuator_model, wheel_imbalance=sim.wheel_imbalance,
-                   mocap=MocapModel.from_sim(sim))
+                   mocap=MocapModel.from_sim(sim), anchor_rest=anchor_rest,
+                   tilted_solver_iterations=sim.tilted_solver_iterations, tilt_threshold=sim.tilt_threshold)
 
     def close(self):
         if self.client is not None and pb.isConnected(physicsClientId=self.client):
