@@ -12,10 +12,18 @@ Behaviours:
 - ``couple``: the robots form a target configuration (Algorithm 3: goal
   pairs from the target and the start poses, conflict-free active pairs,
   Algorithm 2 status updates). Succeeds when every goal pair is coupled;
-- ``decouple``: the named coupled pair separates: its anchor robot wiggles,
+- ``decouple``: the named coupled anchor pair separates. Phase *wiggle*: the
+  anchor robot a receives the paper's wiggle open loop,
   ``v = wiggle_v_bias, w = wiggle_w_amplitude sin(2 pi t / wiggle_period)``
-  (paper, eq. "wiggle"), its partner holds. Succeeds when the anchor head is
-  ``decouple_clearance`` outside the partner's footprint (+ eps);
+  (eq. "wiggle"; outside the MPC's own limits and butterfly set, within the
+  hardware limits); the MPC drives the robots coupled to a straight on at
+  ``wiggle_v_bias`` (so they neither pull on a's front nor turn with it), the
+  opening robot o creeps back into its own assembly at ``decouple_creep``
+  and the rest of o's assembly holds. Released when the anchor head (from
+  the measured poses) is ``decouple_clearance`` + eps outside o's footprint.
+  Phase *settle* (``decouple_settle_time``): a and o push back into their own
+  assemblies at ``decouple_settle_speed`` (away from each other), which
+  straightens and re-seats the anchors the wiggle bent; then it succeeds;
 - ``drive_assembly``: the assembly of the named robots drives as one body
   with twist (v, w) given in the first robot's frame: the first robot
   tracks (v, w), every other member the rigid-body speed at its own position
@@ -94,7 +102,8 @@ class BehaviorManager:
         self.index = {name: i for i, name in enumerate(self.names)}
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
-        self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin)
+        self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin,
+                                             settings.seating())
         self.targets = dict(targets or {})
         self._request_id = 0
         self._req = BehaviorRequest(STOP)
@@ -104,6 +113,8 @@ class BehaviorManager:
         self._message = "no behaviour requested yet"
         self._static = Objectives.stop_all(len(self.names))
         self._decoupling = None          # pair being decoupled
+        self._released_at = None         # decouple: time the pair separated (settle phase from then on)
+        self._o_side = []                # decouple: the opening robot's assembly
         self._assembly = []              # drive_assembly / decouple followers
         self._start_pose = None
         self._assignment = None
@@ -219,6 +230,13 @@ class BehaviorManager:
             raise BehaviorError("decouple: %s and %s are not coupled; coupled pairs: %s"
                                 % (req.pair[0], req.pair[1],
                                    ", ".join("%s-%s" % p.robots for p in self.pairs.coupled.values()) or "none"))
+        if pair.type != pr.ANCHOR:
+            raise BehaviorError("decouple: %s-%s is a knob-hole coupling (rigid); only anchor pairs are "
+                                "decoupled by wiggling" % pair.robots)
+        others = [p for p in self.pairs.coupled.values() if p.key != pair.key]
+        if pair.robot_j in pr.assembly_of(pair.robot_i, self.names, others):
+            raise BehaviorError("decouple: %s and %s are also coupled through other robots; the pair cannot "
+                                "separate on its own" % pair.robots)
         self._need_poses(list(req.pair), poses, "decouple")
         return pair
 
@@ -246,7 +264,7 @@ class BehaviorManager:
             for k, name in enumerate(robots):
                 obj.velocity[self.index[name]] = req.velocities[k]
         # accepted: replace the running behaviour
-        self._finish_decouple()
+        self._finish_decouple(poses)
         self.pairs.clear_goals()
         self._request_id += 1
         self._req, self._robots, self._start = req, robots, now
@@ -263,11 +281,11 @@ class BehaviorManager:
             self.pairs.remove_coupled(decoupling.key)
             decoupling.status = pr.HEAD_INSERTED
             self._decoupling = decoupling
+            self._released_at = None
             self._robots = list(decoupling.robots)
-            self._assembly = pr.assembly_of(decoupling.robot_i, self.names, self.pairs.coupled.values())
-            for m in self._assembly:       # robots coupled to the wiggling robot follow it
-                if m != decoupling.robot_i:
-                    self._static.velocity_mask[self.index[m]] = self.settings.follower_rest_scale
+            coupled = self.pairs.coupled.values()
+            self._assembly = pr.assembly_of(decoupling.robot_i, self.names, coupled)
+            self._o_side = pr.assembly_of(decoupling.robot_j, self.names, coupled)
         if req.behavior == DRIVE_ASSEMBLY:
             group = set()
             for r in robots:
@@ -288,6 +306,7 @@ class BehaviorManager:
             self.pairs.add_coupled(d)
 
     def _decoupled(self, pair, poses):
+        """True when the anchor head is decouple_clearance + eps outside the partner's footprint (None: no pose)."""
         pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
         if pi is None or pj is None:
             return None
@@ -316,7 +335,7 @@ class BehaviorManager:
         if self._state == RUNNING and self._req.behavior == COUPLE:
             self._couple_objectives(obj)
         elif self._state == RUNNING and self._req.behavior == DECOUPLE and self._decoupling is not None:
-            obj.velocity = self._wiggle_profile(now)
+            self._decouple_objectives(obj, now)
         elif self._state == RUNNING and self._req.behavior == DRIVE_ASSEMBLY and poses is not None:
             obj.velocity = self._assembly_velocities(poses)
             leads = set(self._req.robots[:1])
@@ -359,15 +378,46 @@ class BehaviorManager:
                     for m in pr.assembly_of(r, self.names, self.pairs.coupled.values()):
                         obj.velocity_mask[self.index[m]] = hold
 
+    def _decouple_objectives(self, obj, now):
+        """Wiggle phase: a wiggles open loop, its assembly drives straight on at v_bias, o creeps back into
+        its assembly, which holds. Settle phase: a and o push back into their assemblies, which hold."""
+        s, d = self.settings, self._decoupling
+        a, o = self.index[d.robot_i], self.index[d.robot_j]
+        hold = math.sqrt(s.hold_scale)
+        for m in self._assembly + self._o_side:
+            obj.velocity_mask[self.index[m]] = hold
+        if self._released_at is None:
+            obj.velocity = self._wiggle_profile(now)
+            obj.open_loop[a] = self.wiggle_command(now)
+            for m in self._assembly:
+                if m != d.robot_i:
+                    obj.velocity[self.index[m]] = (s.wiggle_v_bias, 0.0)
+                    obj.velocity_mask[self.index[m]] = 1.0
+            obj.velocity[o] = (-s.decouple_creep, 0.0)
+        else:
+            obj.velocity[a] = (s.decouple_settle_speed, 0.0)
+            obj.velocity[o] = (-s.decouple_settle_speed, 0.0)
+        obj.velocity_mask[a] = obj.velocity_mask[o] = 1.0
+
+    def wiggle_command(self, now):
+        """The paper's wiggle (eq. "wiggle") at time ``now`` [s]: (v_bias, w_max sin(B t)), t since the
+        decouple request, B = 2 pi / wiggle_period. Sent open loop to the anchor robot."""
+        s = self.settings
+        t = (now if now is not None else self._start) - self._start
+        return s.wiggle_v_bias, s.wiggle_w_amplitude * math.sin(2 * math.pi * t / s.wiggle_period)
+
     def _wiggle_profile(self, now):
+        """The wiggle over the horizon, within the MPC's own limits: the MPC's prediction of the anchor
+        robot (its partners react to it), while the robot itself receives :meth:`wiggle_command`."""
         s, h, n = self.settings, self.settings.horizon, len(self.names)
         vel = np.zeros((n, h, 2))
         d = self._decoupling
         i = self.index[d.robot_i]
         t = (now if now is not None else self._start) - self._start
         tk = t + s.dt * np.arange(1, h + 1)
-        vel[i, :, 0] = s.wiggle_v_bias
-        vel[i, :, 1] = s.wiggle_w_amplitude * np.sin(2 * math.pi * tk / s.wiggle_period)
+        vel[i, :, 0] = min(s.wiggle_v_bias, s.v_max)
+        vel[i, :, 1] = np.clip(s.wiggle_w_amplitude * np.sin(2 * math.pi * tk / s.wiggle_period),
+                               -s.w_max, s.w_max)
         return vel
 
     def _assembly_velocities(self, poses):
@@ -415,7 +465,7 @@ class BehaviorManager:
                 self._requeue_lost(lost)
                 errors = self._couple_status(now, poses, newly, elapsed)
             elif req.behavior == DECOUPLE:
-                errors = self._decouple_status(poses, elapsed)
+                errors = self._decouple_status(now, poses, elapsed)
             elif req.behavior == DRIVE_ASSEMBLY:
                 errors = self._drive_status(poses, lost, elapsed)
             if self._state == RUNNING and req.timeout and elapsed >= req.timeout:
@@ -477,7 +527,7 @@ class BehaviorManager:
                 ", ".join(p.describe() for p in self.pairs.active) or "none")
         return errors
 
-    def _decouple_status(self, poses, elapsed):
+    def _decouple_status(self, now, poses, elapsed):
         d = self._decoupling
         if d is None:
             return []
@@ -485,13 +535,18 @@ class BehaviorManager:
         if pi is None or pj is None:
             return [float("nan")]
         margin = pr.head_margin(d, pi, pj, self.geometry.footprint())
-        if self._decoupled(d, poses):
+        if self._released_at is None and self._decoupled(d, poses):
+            self._released_at = now
             d.status = pr.DECOUPLED
-            self._decoupling = None
-            self._succeed("%s-%s decoupled after %.2f s (anchor head %.1f mm outside %s)"
-                          % (d.robot_i, d.robot_j, elapsed, -1e3 * margin, d.robot_j))
-        else:
+            self._release_message = "%s-%s decoupled after %.2f s (anchor head %.1f mm outside %s)" % (
+                d.robot_i, d.robot_j, elapsed, -1e3 * margin, d.robot_j)
+        if self._released_at is None:
             self._message = "wiggling %s out of %s (head %.1f mm inside)" % (d.robot_i, d.robot_j, 1e3 * margin)
+        elif now - self._released_at >= self.settings.decouple_settle_time - 1e-9:
+            self._decoupling = None
+            self._succeed(self._release_message + "; assemblies settled")
+        else:
+            self._message = self._release_message + "; settling"
         return [-margin]
 
     def _drive_status(self, poses, lost, elapsed):
