@@ -16,14 +16,23 @@ Behaviours:
   anchor robot a receives the paper's wiggle open loop,
   ``v = wiggle_v_bias, w = wiggle_w_amplitude sin(2 pi t / wiggle_period)``
   (eq. "wiggle"; outside the MPC's own limits and butterfly set, within the
-  hardware limits); the MPC drives the robots coupled to a straight on at
-  ``wiggle_v_bias`` (so they neither pull on a's front nor turn with it), the
-  opening robot o creeps back into its own assembly at ``decouple_creep``
-  and the rest of o's assembly holds. Released when the anchor head (from
-  the measured poses) is ``decouple_clearance`` + eps outside o's footprint.
+  hardware limits), in attempts: when a period did not free the anchor, a
+  backs into o for a moment (the anchor goes back in) and wiggles again, to
+  the other side first (:func:`wiggle`); the MPC drives the robots coupled
+  to a straight on at a's speed (so they neither pull on a's front nor turn
+  with it), the opening robot o creeps back into its own assembly
+  at ``decouple_creep`` (o alone holds still) and the rest of o's assembly
+  holds. Released when, from the measured poses, a's anchor point C_a is
+  farther than anchor_length + ``decouple_clearance`` + eps from o's opening
+  point C_o on ``decouple_confirm_steps`` steps in a row: an anchor that
+  slides out of its holder and turns in it cannot reach into the opening
+  from there (the head point H_a alone is not enough: when a turns against
+  o, H_a leaves o's footprint sideways while the anchor, free to turn in its
+  holder, is still in).
   Phase *settle* (``decouple_settle_time``): a and o push back into their own
-  assemblies at ``decouple_settle_speed`` (away from each other), which
-  straightens and re-seats the anchors the wiggle bent; then it succeeds;
+  assemblies at ``decouple_settle_speed`` (away from each other; a robot
+  without an assembly rests), which straightens and re-seats the anchors the
+  wiggle bent; then it succeeds;
 - ``drive_assembly``: the assembly of the named robots drives as one body
   with twist (v, w) given in the first robot's frame: the first robot
   tracks (v, w), every other member the rigid-body speed at its own position
@@ -84,6 +93,29 @@ class BehaviorStatus:
     errors: List[float] = field(default_factory=list)   # per robot; go_to_goal: distance [m]
 
 
+def wiggle(settings, t):
+    """The anchor robot's open-loop command (v [m/s], w [rad/s], phase) ``t`` seconds into a decouple.
+
+    Attempts follow each other: ``wiggle_cycles`` periods of the paper's wiggle
+    ``(v_bias, +-w_max sin(2 pi tau / wiggle_period))`` (phase "wiggle"; the
+    sign flips every period with ``wiggle_alternate``: the heading swings to
+    both sides in turn), then ``decouple_reseat_time`` s backing into the
+    partner at ``decouple_reseat_speed`` (phase "reseat": an anchor caught
+    half out with both barbs flared goes back in, and the next attempt starts
+    afresh). ``decouple_reseat_time`` 0: one endless wiggle.
+    """
+    s = settings
+    wiggling = s.wiggle_period * s.wiggle_cycles
+    attempt = wiggling + s.decouple_reseat_time
+    k = int(math.floor(t / attempt)) if s.decouple_reseat_time > 0 else 0
+    tau = t - k * attempt
+    if tau >= wiggling:
+        return -s.decouple_reseat_speed, 0.0, "reseat"
+    cycle = k * s.wiggle_cycles + int(math.floor(tau / s.wiggle_period))
+    sign = -1.0 if s.wiggle_alternate and cycle % 2 else 1.0
+    return s.wiggle_v_bias, sign * s.wiggle_w_amplitude * math.sin(2 * math.pi * tau / s.wiggle_period), "wiggle"
+
+
 def _finite(values):
     return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
 
@@ -114,6 +146,7 @@ class BehaviorManager:
         self._static = Objectives.stop_all(len(self.names))
         self._decoupling = None          # pair being decoupled
         self._released_at = None         # decouple: time the pair separated (settle phase from then on)
+        self._release_count = 0          # decouple: consecutive steps the release was seen
         self._o_side = []                # decouple: the opening robot's assembly
         self._assembly = []              # drive_assembly / decouple followers
         self._start_pose = None
@@ -282,6 +315,7 @@ class BehaviorManager:
             decoupling.status = pr.HEAD_INSERTED
             self._decoupling = decoupling
             self._released_at = None
+            self._release_count = 0
             self._robots = list(decoupling.robots)
             coupled = self.pairs.coupled.values()
             self._assembly = pr.assembly_of(decoupling.robot_i, self.names, coupled)
@@ -305,13 +339,20 @@ class BehaviorManager:
         if poses is not None and self._decoupled(d, poses) is False:
             self.pairs.add_coupled(d)
 
-    def _decoupled(self, pair, poses):
-        """True when the anchor head is decouple_clearance + eps outside the partner's footprint (None: no pose)."""
+    def _separation(self, pair, poses):
+        """Distance [m] between a's anchor point C_a and o's opening point C_o (None: no pose)."""
         pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
         if pi is None or pj is None:
             return None
-        margin = pr.head_margin(pair, pi, pj, self.geometry.footprint())
-        return margin < -(self.settings.pair_epsilon + self.settings.decouple_clearance)
+        return pr.alignment_error(pair, pi, pj)[0]
+
+    def _decoupled(self, pair, poses):
+        """True when C_a is farther than anchor_length + decouple_clearance + eps from C_o (None: no pose)."""
+        d = self._separation(pair, poses)
+        if d is None:
+            return None
+        s = self.settings
+        return d > self.geometry.anchor_length + s.decouple_clearance + s.pair_epsilon
 
     def coupling(self):
         """True while a couple behaviour runs (active pairs are assigned every step)."""
@@ -386,25 +427,31 @@ class BehaviorManager:
         hold = math.sqrt(s.hold_scale)
         for m in self._assembly + self._o_side:
             obj.velocity_mask[self.index[m]] = hold
+        # a robot pushes back into its own assembly only when it has one (alone, it would only drag its partner)
+        a_push = s.decouple_settle_speed if len(self._assembly) > 1 else 0.0
+        o_push = s.decouple_settle_speed if len(self._o_side) > 1 else 0.0
         if self._released_at is None:
             obj.velocity = self._wiggle_profile(now)
-            obj.open_loop[a] = self.wiggle_command(now)
-            for m in self._assembly:
+            v, w, phase = wiggle(s, (now if now is not None else self._start) - self._start)
+            obj.open_loop[a] = (v, w)
+            for m in self._assembly:       # a's partners in front go along straight (back in while it reseats)
                 if m != d.robot_i:
-                    obj.velocity[self.index[m]] = (s.wiggle_v_bias, 0.0)
+                    obj.velocity[self.index[m]] = (v, 0.0)
                     obj.velocity_mask[self.index[m]] = 1.0
-            obj.velocity[o] = (-s.decouple_creep, 0.0)
+            obj.velocity[o] = (-s.decouple_creep if o_push else 0.0, 0.0)
         else:
-            obj.velocity[a] = (s.decouple_settle_speed, 0.0)
-            obj.velocity[o] = (-s.decouple_settle_speed, 0.0)
+            obj.velocity[a] = (a_push, 0.0)
+            obj.velocity[o] = (-o_push, 0.0)
         obj.velocity_mask[a] = obj.velocity_mask[o] = 1.0
 
     def wiggle_command(self, now):
         """The paper's wiggle (eq. "wiggle") at time ``now`` [s]: (v_bias, w_max sin(B t)), t since the
-        decouple request, B = 2 pi / wiggle_period. Sent open loop to the anchor robot."""
-        s = self.settings
-        t = (now if now is not None else self._start) - self._start
-        return s.wiggle_v_bias, s.wiggle_w_amplitude * math.sin(2 * math.pi * t / s.wiggle_period)
+        decouple request, B = 2 pi / period. Sent open loop to the anchor robot (see :func:`wiggle`).
+
+        With ``wiggle_alternate`` the sign flips every period (w stays continuous: sin is zero there),
+        so the heading swings to both sides in turn instead of always to the same side.
+        """
+        return wiggle(self.settings, (now if now is not None else self._start) - self._start)[:2]
 
     def _wiggle_profile(self, now):
         """The wiggle over the horizon, within the MPC's own limits: the MPC's prediction of the anchor
@@ -414,10 +461,9 @@ class BehaviorManager:
         d = self._decoupling
         i = self.index[d.robot_i]
         t = (now if now is not None else self._start) - self._start
-        tk = t + s.dt * np.arange(1, h + 1)
-        vel[i, :, 0] = min(s.wiggle_v_bias, s.v_max)
-        vel[i, :, 1] = np.clip(s.wiggle_w_amplitude * np.sin(2 * math.pi * tk / s.wiggle_period),
-                               -s.w_max, s.w_max)
+        for k in range(h):
+            v, w, _ = wiggle(s, t + s.dt * (k + 1))
+            vel[i, k] = (float(np.clip(v, -s.v_max, s.v_max)), float(np.clip(w, -s.w_max, s.w_max)))
         return vel
 
     def _assembly_velocities(self, poses):
@@ -535,13 +581,16 @@ class BehaviorManager:
         if pi is None or pj is None:
             return [float("nan")]
         margin = pr.head_margin(d, pi, pj, self.geometry.footprint())
-        if self._released_at is None and self._decoupled(d, poses):
-            self._released_at = now
-            d.status = pr.DECOUPLED
-            self._release_message = "%s-%s decoupled after %.2f s (anchor head %.1f mm outside %s)" % (
-                d.robot_i, d.robot_j, elapsed, -1e3 * margin, d.robot_j)
+        sep = self._separation(d, poses)
         if self._released_at is None:
-            self._message = "wiggling %s out of %s (head %.1f mm inside)" % (d.robot_i, d.robot_j, 1e3 * margin)
+            self._release_count = self._release_count + 1 if self._decoupled(d, poses) else 0
+            if self._release_count >= self.settings.decouple_confirm_steps:
+                self._released_at = now
+                d.status = pr.DECOUPLED
+                self._release_message = "%s-%s decoupled after %.2f s (C_a %.1f mm from C_o, anchor head " \
+                    "%.1f mm outside %s)" % (d.robot_i, d.robot_j, elapsed, 1e3 * sep, -1e3 * margin, d.robot_j)
+        if self._released_at is None:
+            self._message = "wiggling %s out of %s (C_a %.1f mm from C_o)" % (d.robot_i, d.robot_j, 1e3 * sep)
         elif now - self._released_at >= self.settings.decouple_settle_time - 1e-9:
             self._decoupling = None
             self._succeed(self._release_message + "; assemblies settled")

@@ -71,11 +71,19 @@ class MPCSettings:
     wiggle_w_amplitude: float = 3.0  # rad/s: wiggle turn rate amplitude (paper: w_max); an open-loop
                                      # command, limited by the hardware limits, not by v_max, w_max
     wiggle_period: float = 2.0       # s: wiggle period 2 pi / B
+    wiggle_cycles: int = 1           # wiggle periods per attempt (then the anchor is pushed back in: retry)
+    wiggle_alternate: bool = True    # flip the wiggle's sign every period: the heading swings to both sides
+                                     # in turn (false: the paper's sin(B t), always to the same side first)
+    decouple_reseat_time: float = 0.5    # s: between attempts the anchor robot backs into its partner for
+                                     # this long (0: one endless wiggle, the paper's controller)
+    decouple_reseat_speed: float = 0.04  # m/s: ... at this speed (open loop; the anchor goes back in)
     hold_scale: float = 100.0        # rest-weight scale of an assembly a single robot docks onto (holds still)
-    decouple_clearance: float = 0.003  # m: decoupled once the anchor head is this far outside the opening robot
+    decouple_clearance: float = 0.007  # m: decoupled once H_a is this far outside the opening robot (+ eps);
+                                     # a pulled anchor slides out of its holder: its tip is then ~6 mm behind H_a
     decouple_creep: float = 0.005    # m/s: the opening robot backs into its own assembly while its partner wiggles
     decouple_settle_speed: float = 0.01  # m/s: after the release both robots push back into their assemblies ...
     decouple_settle_time: float = 1.5    # s: ... for this long (re-seats the neighbours' anchors the wiggle bent)
+    decouple_confirm_steps: int = 3  # consecutive control steps the release must be seen
 
     def seating(self):
         """The pair status tests' lining-up conditions (puzzlebot_mpc.pairs.Seating)."""
@@ -94,15 +102,18 @@ class MPCSettings:
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "pair_epsilon", "pair_lost_margin", "wiggle_period",
+                                "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
                                 "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout",
+                                "decouple_confirm_steps",
                                 "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip",
                                 "w_slack_butterfly"], where)
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
                     "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
-                    "decouple_settle_speed", "decouple_settle_time", "hold_scale", "butterfly_lobe_robots",
+                    "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
+                    "decouple_reseat_speed", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
@@ -118,6 +129,9 @@ class MPCSettings:
             raise ConfigError("%s: v_max, w_max (%.3f m/s, %.2f rad/s) exceed the hardware limits "
                               "hardware_v_max, hardware_w_max (%.3f m/s, %.2f rad/s)"
                               % (where, self.v_max, self.w_max, self.hardware_v_max, self.hardware_w_max))
+        if self.decouple_reseat_speed > self.hardware_v_max:
+            raise ConfigError("%s.decouple_reseat_speed (%.3f m/s) exceeds hardware_v_max (%.3f m/s)"
+                              % (where, self.decouple_reseat_speed, self.hardware_v_max))
         if self.wiggle_v_bias > self.hardware_v_max or self.wiggle_w_amplitude > self.hardware_w_max:
             raise ConfigError("%s: the wiggle (%.3f m/s, %.2f rad/s) exceeds the hardware limits "
                               "hardware_v_max, hardware_w_max (%.3f m/s, %.2f rad/s)"

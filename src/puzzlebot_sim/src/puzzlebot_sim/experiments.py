@@ -31,7 +31,7 @@ experiment code, offset in um])``: trial k of seed S is the same trial on
 any machine and in any order. Sweeps run trials in worker processes and
 append each result as one JSON line to a results file; a sweep that is
 interrupted continues where it stopped (finished trials are read back, keyed
-by experiment, offset, seed, trial and the configuration hash).
+by experiment, offset, seed, trial and the version: a hash of configuration and sources).
 """
 
 import hashlib
@@ -112,12 +112,31 @@ def config_files():
             mpc_config_path("mpc.yaml"), mpc_config_path("mpc_sim.yaml"), mpc_config_path("targets.yaml")]
 
 
-def config_hash():
-    """Short hash of the configuration files (results of other configurations are not mixed in)."""
+def source_files():
+    """The Python sources of the packages a trial runs (simulation, controller, common)."""
+    import puzzlebot_common
+    import puzzlebot_mpc
+    import puzzlebot_sim
+
+    out = []
+    for pkg in (puzzlebot_common, puzzlebot_mpc, puzzlebot_sim):
+        root = os.path.dirname(os.path.abspath(pkg.__file__))
+        out += sorted(os.path.join(root, f) for f in os.listdir(root) if f.endswith(".py"))
+    return out
+
+
+def config_hash(overrides=None):
+    """Short hash of the configuration files, the sources and any setting overrides: a result's version.
+
+    Results of another version are kept in the results file but not mixed in:
+    a sweep reruns every trial after any change of physics, controller or set-up.
+    """
     h = hashlib.sha1()
-    for path in config_files():
+    for path in config_files() + source_files():
         with open(path, "rb") as f:
             h.update(f.read())
+    if overrides:
+        h.update(json.dumps(overrides, sort_keys=True).encode())
     return h.hexdigest()[:10]
 
 
@@ -140,13 +159,33 @@ def trial_rng(experiment, seed, trial, offset_mm=0.0):
 
 
 class _Context:
-    """Configuration shared by the trials of a process (loaded once)."""
+    """Configuration shared by the trials of a process (loaded once); ``overrides``: MPC settings to change."""
 
-    def __init__(self, params=None, cfg=None, settings=None):
+    def __init__(self, params=None, cfg=None, settings=None, overrides=None):
         self.params = params or load_experiment_params()
         self.cfg = cfg or load_sim_config()
         self.settings = settings or load_mpc_sim_settings()
+        if overrides:
+            try:
+                self.settings = replace(self.settings, **overrides)
+            except TypeError as e:
+                raise ConfigError("unknown MPC setting in %s: %s" % (sorted(overrides), e)) from None
+            self.settings.check()
         self.mocap = MocapModel(position_std=self.params.mocap_position_std, yaw_std=self.params.mocap_yaw_std)
+
+
+def anchor_in_holder(world, name, body_side):
+    """(in holder?, base x in the robot frame [m], yaw in the holder [rad]) of ``name``'s anchor.
+
+    The anchor's base ball sits in a pocket behind the back face; a base
+    centre outside the body (x < -body_side / 2) means the anchor was pulled
+    out of its holder (a simulation failure: the real anchor is mounted).
+    """
+    rx, ry, ryaw = world.pose2d(name)
+    ax, ay, ayaw = world.anchor_pose2d(name)
+    x = math.cos(ryaw) * (ax - rx) + math.sin(ryaw) * (ay - ry)
+    yaw = math.remainder(ayaw - ryaw, 2 * math.pi)
+    return x >= -body_side / 2.0, x, yaw
 
 
 def _pair_status(physical, a, b):
@@ -217,14 +256,17 @@ def couple_trial(offset_mm, seed, trial, ctx=None):
         gap = -pr.connection_margin(pair, pa, po, geo.footprint())
         lateral = pr.point_in_robot(po, pr.world_point(pa, pair.point_i))[1]
         dyaw = pr.alignment_error(pair, pa, po)[1]
-        ok = seated["t"] is not None and seated["t"] <= p.couple_timeout and final_status == HEAD_INSERTED
-        return _record(COUPLE, offset_mm, seed, trial, success=bool(ok),
+        held, ax, ayaw = anchor_in_holder(world, "a", L)
+        ok = (seated["t"] is not None and seated["t"] <= p.couple_timeout and final_status == HEAD_INSERTED
+              and held)
+        return _record(COUPLE, offset_mm, seed, trial, success=bool(ok), anchor_in_holder=held,
+                       anchor_x_mm=round(1e3 * ax, 1),
                        time_s=round(seated["t"], 2) if seated["t"] is not None else None,
                        controller=STATE_NAMES[state], controller_time_s=round(elapsed, 2),
                        controller_message=message, final_status=int(final_status),
                        pairs=sorted("%s>%s" % k for k, v in final.items() if v == HEAD_INSERTED),
                        gap_mm=round(1e3 * gap, 2), lateral_mm=round(1e3 * lateral, 2), dyaw=round(dyaw, 3),
-                       anchor_yaw_end=round(math.remainder(world.anchor_pose2d("a")[2] - pa[2], 2 * math.pi), 3),
+                       anchor_yaw_end=round(ayaw, 3),
                        steps=cl.steps, failed_steps=cl.failed_steps,
                        start={"a": [round(v, 5) for v in a0], "o": [round(v, 5) for v in o0],
                               "anchor_yaw": round(anchor_yaw, 4)},
@@ -267,9 +309,11 @@ def decouple_trial(seed, trial, ctx=None):
             p.decouple_timeout + 1.0, on_tick=watch)
         _rest(cl, p.hold_time, watch)
         final_status = _pair_status(cl.physical(), "a", "o")
+        held, ax, ayaw = anchor_in_holder(world, "a", L)
         ok = (released["t"] is not None and released["t"] <= p.decouple_timeout and state == SUCCEEDED
-              and final_status == DECOUPLED)
-        return _record(DECOUPLE, 0.0, seed, trial, success=bool(ok),
+              and final_status == DECOUPLED and held)
+        return _record(DECOUPLE, 0.0, seed, trial, success=bool(ok), anchor_in_holder=held,
+                       anchor_x_mm=round(1e3 * ax, 1), anchor_yaw_end=round(ayaw, 3),
                        time_s=round(released["t"], 2) if released["t"] is not None else None,
                        controller=STATE_NAMES[state], controller_time_s=round(elapsed, 2),
                        controller_message=message, final_status=int(final_status), steps=cl.steps,
@@ -341,14 +385,14 @@ class ResultsFile:
 _CTX = None
 
 
-def _init_worker(nice):
+def _init_worker(nice, overrides=None):
     global _CTX
     if nice:
         try:
             os.nice(nice)
         except OSError:
             pass
-    _CTX = _Context()
+    _CTX = _Context(overrides=overrides)
 
 
 def run_task(task):
@@ -404,13 +448,16 @@ def _hms(s):
     return "%d:%02d:%02d" % (s // 3600, s % 3600 // 60, s % 60) if s >= 3600 else "%d:%02d" % (s // 60, s % 60)
 
 
-def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=None):
+def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=None, overrides=None):
     """Run the tasks not yet in ``results_path`` (in ``jobs`` processes) and return the records of all tasks.
 
     Each finished trial is appended to the results file at once, so an
     interrupted sweep loses at most the trials that were running.
+    ``overrides``: MPC settings to change (tuning); part of the version.
     """
-    version = config_hash()
+    overrides = dict(overrides or {})
+    _Context(overrides=overrides)          # bad overrides fail here, before any worker starts
+    version = config_hash(overrides)
     results = ResultsFile(results_path)
     have = {record_key(r): r for r in results.load()}
     todo = [t for t in tasks if t.key(version) not in have]
@@ -423,16 +470,19 @@ def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=Non
     def keep(rec):
         rec["config"] = version
         rec["commit"] = commit
+        if overrides:
+            rec["overrides"] = overrides
         results.append(rec)
         have[record_key(rec)] = rec
         progress.update(rec["success"])
 
     if todo and jobs == 1:
-        _init_worker(0)
+        _init_worker(0, overrides)
         for t in todo:
             keep(run_task(t))
     elif todo:
-        with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker, initargs=(nice,)) as pool:
+        with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker,
+                                                        initargs=(nice, overrides)) as pool:
             for rec in pool.imap_unordered(run_task, todo):
                 keep(rec)
     return [have[t.key(version)] for t in tasks]
@@ -467,6 +517,8 @@ def _parse(argv, experiment):
     ap.add_argument("--nice", type=int, default=0, help="niceness increment of the workers")
     ap.add_argument("--results", default=os.path.join("build", "experiments", "results.jsonl"),
                     help="append-only results file (JSON lines); finished trials are not rerun")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override an MPC setting (tuning; recorded with the results), e.g. wiggle_periods=[2.0,1.5]")
     ap.add_argument("--json", action="store_true", help="stdout: only the JSON line")
     return ap.parse_args(argv)
 
@@ -496,11 +548,20 @@ def main(experiment, argv=None):
             return _fail(prog, "--seed must be an integer or 'fresh' (got %r)" % args.seed)
         if seed < 0:
             return _fail(prog, "--seed must be >= 0 (got %d)" % seed)
+    overrides = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            return _fail(prog, "--set expects KEY=VALUE, got %r" % item)
+        try:
+            overrides[key.strip()] = json.loads(value)
+        except ValueError:
+            overrides[key.strip()] = value
     try:
         load_experiment_params()
         tasks = tasks_for(experiment, args.trials, seed, (offset,))
         label = "%s %s mm" % (experiment, ("%g" % offset)) if experiment == COUPLE else experiment
-        records = run_sweep(tasks, args.results, args.jobs or None, args.nice, label=label)
+        records = run_sweep(tasks, args.results, args.jobs or None, args.nice, label=label, overrides=overrides)
     except ConfigError as e:
         return _fail(prog, str(e))
     except KeyboardInterrupt:
@@ -512,7 +573,9 @@ def main(experiment, argv=None):
         out["offset_mm"] = offset
     out.update({"seed": seed, "success_rate": summary["success_rate"], "max_time_s": summary["max_time_s"],
                 "controller_succeeded": summary["controller_succeeded"],
-                "failed_mpc_steps": summary["failed_mpc_steps"], "config": config_hash()})
+                "failed_mpc_steps": summary["failed_mpc_steps"], "config": config_hash(overrides)})
+    if overrides:
+        out["overrides"] = overrides
     if not args.json:
         failed = [r for r in records if not r["success"]]
         for r in failed[:10]:
