@@ -119,7 +119,7 @@ def test_actuator_effects_delay_and_wheel_imbalance():
         assert abs(w.pose2d("pz1")[0]) < 0.001                 # still waiting for the delayed command
         w.run(0.5)
         assert w.pose2d("pz1")[0] > 0.01
-        assert w.driven_velocity("pz1") == (0.05, 0.0)
+        assert w.driven_velocity("pz1") == pytest.approx((0.05, 0.0))
         yaw = pb.getEulerFromQuaternion(w.measure("pz1")[1])[2]
         assert yaw - w.pose2d("pz1")[2] == pytest.approx(0.05, abs=1e-6)
     with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)], wheel_imbalance=0.05) as w:

@@ -26,6 +26,7 @@ import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.behaviors import BehaviorManager
+from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
 from puzzlebot_mpc.model import NX
 from puzzlebot_mpc.pairs import PairBook
@@ -84,7 +85,7 @@ class StepOutput:
 class ControlLoop:
     """Poses in, behaviour objectives, MPC solve, commands out."""
 
-    def __init__(self, robot_names, settings, geometry=None, targets=None):
+    def __init__(self, robot_names, settings, geometry=None, targets=None, actuator_model=None):
         self.names = list(robot_names)
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
@@ -93,8 +94,12 @@ class ControlLoop:
         self.behaviors = BehaviorManager(self.names, settings, self.geometry, self.pairs, targets)
         self.mpc = MultiRobotMPC(settings, len(self.names)).setup()
         self._last_cmd = np.zeros((len(self.names), 2))
+        # Identified actuator effects (effects.ActuatorModel), None = plain unicycle: see compensation.py.
+        self.compensation = Compensation.create(actuator_model, self.names, settings)
 
     def on_pose(self, name, stamp, x, y, yaw):
+        if self.compensation is not None:      # actuator model: measured yaw -> body heading
+            yaw = self.compensation.body_yaw(yaw)
         return self.poses.update(name, stamp, x, y, yaw)
 
     def fresh_poses(self, now):
@@ -119,6 +124,8 @@ class ControlLoop:
             self._last_cmd[:] = 0.0
             result = MPCResult(np.zeros((n, 2)), np.zeros((n, self.settings.horizon + 1, NX)),
                                False, "no fresh pose for any robot", 0.0, 0, float("nan"), fallback="stop")
+            if self.compensation is not None:  # actuator model: remember the zero commands
+                self.compensation.to_commands(result, now, stale)
             return self._output(result, status, stale, poses, newly, lost)
         if self.behaviors.coupling():
             self.pairs.assign_active(poses)
@@ -134,6 +141,9 @@ class ControlLoop:
                 pose = (latest.x, latest.y, latest.yaw) if latest else (0.0, 0.0, 0.0)
             x0[i, :3] = pose
             x0[i, 3:] = self._last_cmd[i]
+        if self.compensation is not None:      # actuator model: plan from where the robots will be
+            self.compensation.initial_states(x0, now, {m: self.poses.latest(m).stamp for m in self.names
+                                                       if m not in stale}, stale)
         if stale:
             for p in obj.pairs:     # no alignment towards a robot whose pose is unknown
                 if self.names[p.i] in stale or self.names[p.j] in stale:
@@ -146,6 +156,8 @@ class ControlLoop:
             if poses[name] is None:
                 result.commands[i] = 0.0
         self._last_cmd = result.commands.copy()
+        if self.compensation is not None:      # actuator model: planned velocities -> commands
+            self.compensation.to_commands(result, now, stale)
         return self._output(result, status, stale, poses, newly, lost)
 
     def _output(self, result, status, stale, poses, newly, lost):

@@ -1,0 +1,188 @@
+"""The error metric: open-loop prediction windows, integrated fast.
+
+A window starts at a measured pose (time ts) and ends at the measured pose
+nearest ts + H (time te). The model's prediction of the pose at te starts
+from the measured pose at ts with the actuator state that the commands of the
+previous ``history_s`` seconds produce, and integrates the recorded commands.
+
+Every window of a robot sees the same actuator velocity signal (the actuator
+state depends on the commands only, not on the pose), so the velocities are
+computed once on a uniform grid (``effects.actuator_velocities``, started in
+steady state ``history_s`` before the first window) and every window is two
+look-ups in cumulative integrals: the heading change
+``Theta(te) - Theta(ts)`` and the displacement
+``exp(i (yaw_s - offset - Theta(ts))) (C(te) - C(ts))`` with
+``C(t) = integral of v exp(i Theta)``. This is the same model as
+``effects.predict`` (tests compare them) at a cost independent of H.
+"""
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from puzzlebot_common.geometry import wrap_angle
+from puzzlebot_mpc.effects import actuator_velocities, command_pieces
+from puzzlebot_mpc.identify.data import DataError
+
+
+PIECES_CACHE = 8      # command-piece structures kept per window set (one per recent delay value)
+SERIES_LIMIT = 0.02   # rad: below this half-angle sin(x)/x is taken as 1 - x^2/6
+
+
+@dataclass
+class Windows:
+    """Prediction windows of one robot, with their integration grid."""
+
+    robot: str
+    ts: np.ndarray        # start times [s]
+    te: np.ndarray        # end times [s]
+    p_start: np.ndarray   # measured positions (complex x + iy) at ts
+    p_end: np.ndarray     # ... and at te
+    yaw_start: np.ndarray
+    yaw_end: np.ndarray
+    g0: float             # integration grid start [s]
+    dt: float
+    n: int                # grid intervals
+    ks: np.ndarray        # grid interval holding ts, and the fraction of it before ts
+    fs: np.ndarray
+    ke: np.ndarray
+    fe: np.ndarray
+    cache: dict = field(default_factory=dict, repr=False)   # delay -> command pieces of the grid
+
+    def __len__(self):
+        return int(self.ts.size)
+
+
+def nearest_samples(t, wanted, tol):
+    """Index of the pose sample nearest each wanted time, and a mask of those within tol."""
+    if t.size < 2 or wanted.size == 0:
+        j = np.zeros(wanted.size, int)
+        return j, np.abs(t[j] - wanted) <= tol if t.size else np.zeros(wanted.size, bool)
+    j = np.clip(np.searchsorted(t, wanted), 1, t.size - 1)
+    j = np.where((wanted - t[j - 1]) <= (t[j] - wanted), j - 1, j)
+    return j, np.abs(t[j] - wanted) <= tol
+
+
+def median_period(r):
+    return float(np.median(np.diff(r.t))) if r.t.size > 1 else 0.0
+
+
+def usable_start(r, history_s):
+    """Earliest window start: the record's start plus the command history."""
+    return max(float(r.t[0]), float(r.cmd_t[0])) + history_s
+
+
+def split_time(r, fit_fraction):
+    return float(r.t[0] + fit_fraction * (r.t[-1] - r.t[0]))
+
+
+def make_windows(r, t_from, t_to, horizon, stride, settings):
+    """Windows of about ``horizon`` s starting every ``stride`` s, inside [t_from, t_to]."""
+    tol = settings.pose_tolerance * median_period(r)
+    count = int(np.floor((t_to - horizon - t_from) / stride + 1e-9)) + 1 if t_to - horizon >= t_from else 0
+    i0, ok = nearest_samples(r.t, t_from + stride * np.arange(count), tol)
+    i0 = np.unique(i0[ok])
+    i0 = i0[r.t[i0] >= t_from]
+    i1, ok = nearest_samples(r.t, r.t[i0] + horizon, tol)
+    keep = ok & (i1 > i0) & (r.t[i1] <= t_to)
+    i0, i1 = i0[keep], i1[keep]
+    ts, te = r.t[i0], r.t[i1]
+    dt = settings.grid_dt_s
+    g0 = (float(ts.min()) if ts.size else t_from) - settings.history_s
+    n = int(np.ceil(((float(te.max()) if te.size else t_to) - g0) / dt)) + 1
+    xs, xe = (ts - g0) / dt, (te - g0) / dt
+    ks, ke = np.floor(xs).astype(int), np.floor(xe).astype(int)
+    return Windows(robot=r.name, ts=ts, te=te, p_start=r.x[i0] + 1j * r.y[i0], p_end=r.x[i1] + 1j * r.y[i1],
+                   yaw_start=r.yaw[i0], yaw_end=r.yaw[i1], g0=g0, dt=dt, n=n,
+                   ks=ks, fs=xs - ks, ke=ke, fe=xe - ke)
+
+
+def subset(w, mask):
+    """The windows selected by a boolean mask (same grid)."""
+    per_window = ("ts", "te", "p_start", "p_end", "yaw_start", "yaw_end", "ks", "fs", "ke", "fe")
+    return replace(w, cache={}, **{k: getattr(w, k)[mask] for k in per_window})
+
+
+def fit_and_validation_windows(r, settings):
+    """(fit windows, validation windows) of a robot; DataError if either is empty."""
+    t0 = usable_start(r, settings.history_s)
+    split = split_time(r, settings.fit_fraction)
+    fit = make_windows(r, t0, split, settings.horizon_s, settings.window_stride_s, settings)
+    val = make_windows(r, max(split, t0), float(r.t[-1]), settings.horizon_s, settings.window_stride_s, settings)
+    for label, w in (("fitting", fit), ("validation", val)):
+        if len(w) == 0:
+            raise DataError("robot %s: no %s window: the record (%.1f s of poses from t=%.1f s, first command at "
+                            "t=%.1f s) is too short or too sparse; each part needs %.1f s of command history "
+                            "plus a %.1f s horizon with pose samples at both ends"
+                            % (r.name, label, r.duration, r.t[0], r.cmd_t[0], settings.history_s,
+                               settings.horizon_s))
+    return fit, val
+
+
+def _pieces(r, w, delay):
+    """The command pieces of a window set's grid for a delay, cached (fits vary the other
+    parameters far more often than the delay)."""
+    cache = w.cache
+    if delay not in cache:
+        if len(cache) >= PIECES_CACHE:
+            cache.pop(next(iter(cache)))
+        cache[delay] = command_pieces(r.cmd_t, delay, w.g0, w.dt, w.n)
+    return cache[delay]
+
+
+def predict(params, r, w):
+    """Predicted measured pose at each window's end: (complex position, yaw)."""
+    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n,
+                                pieces=_pieces(r, w, params["delay_s"]))
+    dth = om * w.dt
+    theta = np.concatenate([[0.0], np.cumsum(dth)])
+    half = 0.5 * dth
+    # exact arc per interval: chord = v dt sin(half) / half along theta + half; the series of
+    # sin(x)/x to x^2 is exact to 1e-9 for |x| < 0.02 (2 rad/s at dt = 0.01 s gives 0.01)
+    chord = 1.0 - half * half / 6.0
+    big = np.abs(half) >= SERIES_LIMIT
+    if big.any():
+        chord[big] = np.sin(half[big]) / half[big]
+    dz = v * w.dt * chord * np.exp(1j * (theta[:-1] + half))
+    c = np.concatenate([[0.0], np.cumsum(dz)])
+    dth = np.append(dth, 0.0)
+    dz = np.append(dz, 0.0)
+    th_s = theta[w.ks] + w.fs * dth[w.ks]
+    th_e = theta[w.ke] + w.fe * dth[w.ke]
+    c_s = c[w.ks] + w.fs * dz[w.ks]
+    c_e = c[w.ke] + w.fe * dz[w.ke]
+    yaw = w.yaw_start + (th_e - th_s)
+    pos = w.p_start + np.exp(1j * (w.yaw_start - params["offset_rad"] - th_s)) * (c_e - c_s)
+    return pos, yaw
+
+
+def errors(params, r, w):
+    """Measured minus predicted end pose: (complex position error [m], wrapped yaw error [rad])."""
+    pos, yaw = predict(params, r, w)
+    return w.p_end - pos, wrap_angle(w.yaw_end - yaw)
+
+
+@dataclass
+class Metric:
+    rmse_pos_m: float
+    rmse_yaw_rad: float
+    n: int
+
+    def as_dict(self):
+        return {"rmse_pos_m": self.rmse_pos_m, "rmse_yaw_rad": self.rmse_yaw_rad}
+
+
+def metric(errs):
+    """Pooled RMSE of a list of (position error, yaw error) arrays."""
+    ep = np.concatenate([e[0] for e in errs]) if errs else np.zeros(0)
+    ey = np.concatenate([e[1] for e in errs]) if errs else np.zeros(0)
+    if ep.size == 0:
+        return Metric(float("nan"), float("nan"), 0)
+    return Metric(float(np.sqrt(np.mean(np.abs(ep) ** 2))), float(np.sqrt(np.mean(ey ** 2))), int(ep.size))
+
+
+def command_at(r, times):
+    """(v, w) command in force at each time (issued at or before it; zero before the first)."""
+    i = np.searchsorted(r.cmd_t, times, side="right") - 1
+    safe = np.maximum(i, 0)
+    return np.where(i >= 0, r.cmd_v[safe], 0.0), np.where(i >= 0, r.cmd_w[safe], 0.0)

@@ -1,0 +1,60 @@
+"""Settings of the model-identification tool, with units and defaults.
+
+The defaults are the method of docs/model-identification.md (issue 7);
+``config/identify.yaml`` holds the same values under ``identify:`` and a file
+of that form can override them with ``--config``.
+"""
+
+from dataclasses import dataclass
+
+from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.params import from_mapping, require_positive
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    fit_fraction: float = 0.7        # first fraction of each robot's time span used for fitting
+    horizon_s: float = 1.0           # s: open-loop prediction horizon H of the error metric
+    window_stride_s: float = 0.1     # s: a prediction window starts every this often
+    history_s: float = 2.0           # s: commands fed to the model before a window's start
+    grid_dt_s: float = 0.01          # s: time step of the vectorised model integration
+    pose_tolerance: float = 1.01     # x median pose period: farthest a pose sample may be from the
+                                     # wanted window start/end (a dropped sample's neighbour is used)
+    accept_margin: float = 0.10      # an effect is added only if it cuts the validation position or yaw
+                                     # RMSE by at least this fraction ...
+    max_worsening: float = 0.02      # ... raises neither by more than this fraction ...
+    # ... lowers the improved RMSE on more than half of the robots ...
+    accept_alpha: float = 0.01       # ... and significantly: one-sided p below this (blocks of one horizon)
+    residual_horizon_s: float = 0.5  # s: horizon of the residual-analysis windows
+    residual_stride_s: float = 0.6   # s: their spacing (> horizon: no shared pose sample, independent noise)
+    residual_lags: int = 10          # autocorrelation-test lags (in windows)
+    residual_alpha: float = 0.01     # significance level of the whiteness and correlation tests
+    max_command_lag_s: float = 0.5   # s: regressors include the commands up to this far back
+    max_nfev: int = 60               # least-squares function evaluations per fit
+    glitch_speed: float = 1.0        # m/s: a pose farther from its neighbours' median than this speed
+    glitch_margin_m: float = 0.01    # m    allows (plus this margin) is a mocap glitch and dropped
+    glitch_turn_rate: float = 20.0   # rad/s: the same for the yaw ...
+    glitch_margin_rad: float = 0.3   # rad  ... with this margin
+
+    @classmethod
+    def from_dict(cls, data, where="identify"):
+        if isinstance(data, dict) and "identify" in data:
+            data, where = data["identify"], where + ".identify"
+        return from_mapping(cls, data, where)
+
+    def check(self, where="identify"):
+        require_positive(self, ["horizon_s", "window_stride_s", "history_s", "grid_dt_s", "pose_tolerance",
+                                "accept_margin", "accept_alpha", "residual_horizon_s", "residual_stride_s", "residual_lags",
+                                "residual_alpha", "max_nfev", "glitch_speed", "glitch_margin_m",
+                                "glitch_turn_rate", "glitch_margin_rad"], where)
+        if not 0.0 < self.fit_fraction < 1.0:
+            raise ConfigError("%s.fit_fraction: must be in (0, 1), got %r" % (where, self.fit_fraction))
+        if self.max_worsening < 0:
+            raise ConfigError("%s.max_worsening: must be >= 0" % where)
+        if self.max_command_lag_s < 0:
+            raise ConfigError("%s.max_command_lag_s: must be >= 0" % where)
+        if self.grid_dt_s > self.window_stride_s:
+            raise ConfigError("%s.grid_dt_s (%g) must be <= window_stride_s (%g)"
+                              % (where, self.grid_dt_s, self.window_stride_s))
+        if self.residual_alpha >= 1 or self.accept_alpha >= 1:
+            raise ConfigError("%s.residual_alpha and accept_alpha: must be < 1" % where)

@@ -1,0 +1,93 @@
+#!/usr/bin/env python3
+"""Benchmark of identify_model at lab size (not a test: prints tables).
+
+For every scenario of test_identify_effects (each effect, pairs, none),
+simulates 3 robots x 150 s of 100 Hz mocap (noise, dropped samples) with
+10 Hz commands, writes a bag, runs the command-line tool on it as a user
+would (``python -m puzzlebot_mpc.identify DATA --out --model-out --plot``,
+wall time measured, including start-up, reading, plotting and writing), and
+prints the recovery table: effects named, parameter errors, validation
+position RMSE against the true model's, residual verdict, runtime.
+
+    scripts/env.sh python src/puzzlebot_mpc/test/identify_benchmark.py [--robots 3] [--duration 150]
+        [--seed 1] [--format bag] [SCENARIO ...]
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import identify_synth as synth  # noqa: E402
+import test_identify_effects as scenarios  # noqa: E402
+from puzzlebot_mpc.identify import IdentifySettings, data, fit  # noqa: E402
+
+
+def run(name, effects, args, tmp):
+    rec = synth.lab_record(effects, n_robots=args.robots, duration=args.duration, seed=args.seed)
+    path = os.path.join(tmp, "%s.%s" % (name.replace("+", "_").replace(" ", ""), args.format))
+    (synth.write_bag if args.format == "bag" else synth.write_csv)(path, rec)
+    out = path + ".json"
+    t0 = time.time()
+    proc = subprocess.run([sys.executable, "-m", "puzzlebot_mpc.identify", path, "--out", out,
+                           "--model-out", path + ".yaml", "--plot", path + ".png", "--quiet"],
+                          capture_output=True, text=True)
+    wall = time.time() - t0
+    if proc.returncode != 0:
+        return "| %s | tool failed: %s |" % (name, proc.stderr.strip()), False, wall
+    rep = json.load(open(out))
+    problem = fit.Problem(data.load(path), IdentifySettings())
+    true = problem.validation(synth.model_of(effects).all_params())[0]
+    found = [e["name"] for e in rep["effects"]]
+    params = {k: v for e in rep["effects"] for k, v in e["params"].items()}
+    errs = []
+    ok = sorted(found) == sorted(effects)
+    for eff, ps in effects.items():
+        for key, value in ps.items():
+            if key in params:
+                rel = params[key] / value - 1.0
+                ok &= abs(rel) <= scenarios.PARAM_TOLERANCE
+                errs.append("%s %.4g (%+.1f %%)" % (key, params[key], 100 * rel))
+            else:
+                errs.append("%s missing" % key)
+    ratio = rep["after"]["rmse_pos_m"] / true.rmse_pos_m
+    ok &= ratio <= scenarios.RMSE_FACTOR
+    row = "| %s | %s | %s | %.2f | %.2f | %.2f | %.2f | %s | %.1f |" % (
+        name, ", ".join(found) or "none", "; ".join(errs) or "-", 1e3 * rep["before"]["rmse_pos_m"],
+        1e3 * rep["after"]["rmse_pos_m"], 1e3 * true.rmse_pos_m, ratio,
+        "white" if rep["residual"]["white"] else "structured", wall)
+    return row, ok, wall
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description="identify_model benchmark at lab size")
+    p.add_argument("--robots", type=int, default=3)
+    p.add_argument("--duration", type=float, default=150.0)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--format", choices=["bag", "csv"], default="bag")
+    p.add_argument("scenario", nargs="*", help="default: all of test_identify_effects.SCENARIOS")
+    args = p.parse_args(argv)
+    names = args.scenario or list(scenarios.SCENARIOS)
+    print("%d robots x %.0f s, 100 Hz mocap, %s, seed %d" % (args.robots, args.duration, args.format, args.seed))
+    print("| scenario | effects found | parameters (error) | pos RMSE nominal [mm] | identified [mm] | "
+          "true model [mm] | ratio | residual | wall time [s] |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    walls, passed = [], 0
+    with tempfile.TemporaryDirectory(prefix="identify_bench_") as tmp:
+        for name in names:
+            row, ok, wall = run(name, scenarios.SCENARIOS[name][0], args, tmp)
+            print(row + ("" if ok else " **FAIL**"), flush=True)
+            walls.append(wall)
+            passed += ok
+    walls.sort()
+    print("\n%d of %d scenarios pass (names exact, parameters within %.0f %%, RMSE within %.1fx of the true model); "
+          "wall time median %.1f s, max %.1f s" % (passed, len(names), 100 * scenarios.PARAM_TOLERANCE,
+                                                   scenarios.RMSE_FACTOR, walls[len(walls) // 2], walls[-1]))
+
+
+if __name__ == "__main__":
+    main()
