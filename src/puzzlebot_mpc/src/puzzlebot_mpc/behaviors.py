@@ -93,16 +93,26 @@ class BehaviorStatus:
     errors: List[float] = field(default_factory=list)   # per robot; go_to_goal: distance [m]
 
 
-def wiggle(settings, t):
-    """The anchor robot's open-loop command (v [m/s], w [rad/s], phase) ``t`` seconds into a decouple.
+def wiggle(settings, t, relative_heading=None):
+    """The anchor robot's command (v [m/s], w [rad/s], phase) ``t`` seconds into a decouple.
 
-    Attempts follow each other: ``wiggle_cycles`` periods of the paper's wiggle
-    ``(v_bias, +-w_max sin(2 pi tau / wiggle_period))`` (phase "wiggle"; the
-    sign flips every period with ``wiggle_alternate``: the heading swings to
-    both sides in turn), then ``decouple_reseat_time`` s backing into the
-    partner at ``decouple_reseat_speed`` (phase "reseat": an anchor caught
-    half out with both barbs flared goes back in, and the next attempt starts
-    afresh). ``decouple_reseat_time`` 0: one endless wiggle.
+    Attempts follow each other: ``wiggle_cycles`` periods of wiggling (phase
+    "wiggle"; the sign flips every period with ``wiggle_alternate``: the
+    heading swings to both sides in turn), then ``decouple_reseat_time`` s
+    backing into the partner at ``decouple_reseat_speed`` (phase "reseat": an
+    anchor caught half out with both barbs flared goes back in, and the next
+    attempt starts afresh). ``decouple_reseat_time`` 0: one endless wiggle.
+
+    The wiggle is the paper's ``(v_bias, +-w_max sin(B tau))`` (B = 2 pi /
+    wiggle_period) when ``wiggle_heading_amplitude`` is 0 or the relative
+    heading is unknown. Otherwise it swings the *relative* heading of the pair
+    (``relative_heading`` [rad], anchor robot minus partner, from the poses)
+    along ``A sin(B tau)``, A = wiggle_heading_amplitude: ``w = A B cos(B tau)
+    + k (A sin(B tau) - relative_heading)`` limited to +-w_max, k =
+    wiggle_heading_gain. The open-loop wiggle keeps turning when the anchor
+    blocks the turn and then over-rotates on the way back (in the simulation
+    the anchor flips round in its holder); the closed-loop one turns the
+    anchor just past its holder's play, where one barb takes the pull.
     """
     s = settings
     wiggling = s.wiggle_period * s.wiggle_cycles
@@ -113,7 +123,12 @@ def wiggle(settings, t):
         return -s.decouple_reseat_speed, 0.0, "reseat"
     cycle = k * s.wiggle_cycles + int(math.floor(tau / s.wiggle_period))
     sign = -1.0 if s.wiggle_alternate and cycle % 2 else 1.0
-    return s.wiggle_v_bias, sign * s.wiggle_w_amplitude * math.sin(2 * math.pi * tau / s.wiggle_period), "wiggle"
+    b = 2 * math.pi / s.wiggle_period
+    if s.wiggle_heading_amplitude > 0 and relative_heading is not None:
+        a = sign * s.wiggle_heading_amplitude
+        w = a * b * math.cos(b * tau) + s.wiggle_heading_gain * (a * math.sin(b * tau) - relative_heading)
+        return s.wiggle_v_bias, max(-s.wiggle_w_amplitude, min(s.wiggle_w_amplitude, w)), "wiggle"
+    return s.wiggle_v_bias, sign * s.wiggle_w_amplitude * math.sin(b * tau), "wiggle"
 
 
 def _finite(values):
@@ -376,7 +391,7 @@ class BehaviorManager:
         if self._state == RUNNING and self._req.behavior == COUPLE:
             self._couple_objectives(obj)
         elif self._state == RUNNING and self._req.behavior == DECOUPLE and self._decoupling is not None:
-            self._decouple_objectives(obj, now)
+            self._decouple_objectives(obj, now, poses)
         elif self._state == RUNNING and self._req.behavior == DRIVE_ASSEMBLY and poses is not None:
             obj.velocity = self._assembly_velocities(poses)
             leads = set(self._req.robots[:1])
@@ -419,7 +434,7 @@ class BehaviorManager:
                     for m in pr.assembly_of(r, self.names, self.pairs.coupled.values()):
                         obj.velocity_mask[self.index[m]] = hold
 
-    def _decouple_objectives(self, obj, now):
+    def _decouple_objectives(self, obj, now, poses=None):
         """Wiggle phase: a wiggles open loop, its assembly drives straight on at v_bias, o creeps back into
         its assembly, which holds. Settle phase: a and o push back into their assemblies, which hold."""
         s, d = self.settings, self._decoupling
@@ -432,7 +447,7 @@ class BehaviorManager:
         o_push = s.decouple_settle_speed if len(self._o_side) > 1 else 0.0
         if self._released_at is None:
             obj.velocity = self._wiggle_profile(now)
-            v, w, phase = wiggle(s, (now if now is not None else self._start) - self._start)
+            v, w, phase = self._wiggle(now, poses)
             obj.open_loop[a] = (v, w)
             for m in self._assembly:       # a's partners in front go along straight (back in while it reseats)
                 if m != d.robot_i:
@@ -444,14 +459,20 @@ class BehaviorManager:
             obj.velocity[o] = (-o_push, 0.0)
         obj.velocity_mask[a] = obj.velocity_mask[o] = 1.0
 
-    def wiggle_command(self, now):
+    def wiggle_command(self, now, poses=None):
         """The paper's wiggle (eq. "wiggle") at time ``now`` [s]: (v_bias, w_max sin(B t)), t since the
         decouple request, B = 2 pi / period. Sent open loop to the anchor robot (see :func:`wiggle`).
 
         With ``wiggle_alternate`` the sign flips every period (w stays continuous: sin is zero there),
         so the heading swings to both sides in turn instead of always to the same side.
         """
-        return wiggle(self.settings, (now if now is not None else self._start) - self._start)[:2]
+        return self._wiggle(now, poses)[:2]
+
+    def _wiggle(self, now, poses):
+        d = self._decoupling
+        pi, pj = (poses.get(d.robot_i), poses.get(d.robot_j)) if poses else (None, None)
+        rel = None if pi is None or pj is None else math.remainder(pi[2] - pj[2], 2 * math.pi)
+        return wiggle(self.settings, (now if now is not None else self._start) - self._start, rel)
 
     def _wiggle_profile(self, now):
         """The wiggle over the horizon, within the MPC's own limits: the MPC's prediction of the anchor

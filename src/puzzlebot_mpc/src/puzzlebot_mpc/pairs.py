@@ -26,12 +26,13 @@ heading error at most anchor_yaw_free), which also makes them meaningful
 for a kinematic plant where bodies may overlap:
 
 - decoupled -> head_aligned when ``head`` is inside robot_j's footprint + eps,
-  through the opening, and *lined up*: the head's lateral offset from the
-  opening's axis and the pair's heading error within the seating tolerances
-  (:class:`Seating`; the anchor head has about 1.5 mm of play in the mouth);
+  through the opening;
 - head_aligned -> head_inserted when ``C_i`` is inside robot_j's footprint + eps,
-  through the opening and lined up, on ``confirm_steps`` consecutive updates
-  (measurement noise must not declare a skewed anchor seated);
+  through the opening and *lined up* -- C_i's lateral offset from the
+  opening's axis and the pair's heading error within the seating tolerances
+  (:class:`Seating`: an anchor pushed home askew leaves a barb outside its
+  slit) -- on ``confirm_steps`` consecutive updates (measurement noise must
+  not declare a skewed anchor seated);
 - head_aligned -> decoupled when ``head`` leaves robot_j's footprint + eps, or
   when the pair has been head_aligned for ``align_timeout`` s without being
   inserted (a jammed anchor: the docking robot backs off and lines up again);
@@ -220,9 +221,8 @@ def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=No
     status = pair.status
     if status == DECOUPLED:
         pair.confirmed = 0
-        if (head_margin(pair, pose_i, pose_j, footprint) >= -eps
-                and through_opening(pair, pose_i, pose_j, geometry, eps)
-                and lined_up(pair, pose_i, pose_j, seating)):
+        if head_margin(pair, pose_i, pose_j, footprint) >= -eps and through_opening(pair, pose_i, pose_j,
+                                                                                     geometry, eps):
             return HEAD_ALIGNED
         return DECOUPLED
     if status == HEAD_ALIGNED:

@@ -67,10 +67,14 @@ class MPCSettings:
     insert_timeout: float = 4.0      # s: head_aligned for longer (a jammed anchor): back off, line up again
     hardware_v_max: float = 0.2      # m/s: the robots' own speed limit (open-loop commands stay within it)
     hardware_w_max: float = 6.0      # rad/s: the robots' own turn-rate limit
-    wiggle_v_bias: float = 0.02      # m/s: forward speed of the anchor robot while it wiggles out
-    wiggle_w_amplitude: float = 3.0  # rad/s: wiggle turn rate amplitude (paper: w_max); an open-loop
-                                     # command, limited by the hardware limits, not by v_max, w_max
+    wiggle_v_bias: float = 0.03      # m/s: forward speed of the anchor robot while it wiggles out
+    wiggle_w_amplitude: float = 3.0  # rad/s: wiggle turn rate amplitude (paper: w_max), the turn rate limit of
+                                     # the closed-loop swing; sent directly: within the hardware limits, not
+                                     # v_max, w_max
     wiggle_period: float = 2.0       # s: wiggle period 2 pi / B
+    wiggle_heading_amplitude: float = 0.55  # rad: the wiggle swings the pair's relative heading +-this
+                                     # (closed loop on the poses); 0: the paper's open-loop w_max sin(B t)
+    wiggle_heading_gain: float = 10.0    # 1/s: feedback gain of that relative-heading swing
     wiggle_cycles: int = 1           # wiggle periods per attempt (then the anchor is pushed back in: retry)
     wiggle_alternate: bool = True    # flip the wiggle's sign every period: the heading swings to both sides
                                      # in turn (false: the paper's sin(B t), always to the same side first)
@@ -113,7 +117,7 @@ class MPCSettings:
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
                     "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
-                    "decouple_reseat_speed", "hold_scale", "butterfly_lobe_robots",
+                    "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))

@@ -63,6 +63,8 @@ EXPERIMENT_CODES = {COUPLE: 1, DECOUPLE: 2}
 MATE_GAP = 0.0003
 #: Simulated time the robots rest on the floor before a trial starts [s].
 SETTLE_S = 0.3
+#: An anchor turned further than this in its holder [rad] has flipped round (holder freedom: +/-0.5 rad).
+ANCHOR_YAW_BROKEN = 1.0
 #: Start poses drawn again at most this often when they put an anchor inside the other robot.
 MAX_REDRAWS = 100
 
@@ -177,15 +179,17 @@ class _Context:
 def anchor_in_holder(world, name, body_side):
     """(in holder?, base x in the robot frame [m], yaw in the holder [rad]) of ``name``'s anchor.
 
-    The anchor's base ball sits in a pocket behind the back face; a base
-    centre outside the body (x < -body_side / 2) means the anchor was pulled
-    out of its holder (a simulation failure: the real anchor is mounted).
+    The anchor's base ball sits in a pocket behind the back face and turns
+    in it within about +/-0.5 rad (facts.md). A base centre outside the body
+    (x < -body_side / 2) or an anchor turned by more than
+    ANCHOR_YAW_BROKEN means it was pulled out of its holder or flipped round
+    in it: a simulation failure (the real anchor is mounted), never a success.
     """
     rx, ry, ryaw = world.pose2d(name)
     ax, ay, ayaw = world.anchor_pose2d(name)
     x = math.cos(ryaw) * (ax - rx) + math.sin(ryaw) * (ay - ry)
     yaw = math.remainder(ayaw - ryaw, 2 * math.pi)
-    return x >= -body_side / 2.0, x, yaw
+    return x >= -body_side / 2.0 and abs(yaw) <= ANCHOR_YAW_BROKEN, x, yaw
 
 
 def _pair_status(physical, a, b):
