@@ -60,8 +60,8 @@ class MPCSettings:
     approach_gain_lateral: float = 2.0    # m/m: standoff per metre of lateral offset of the head
     pair_epsilon: float = 0.0015     # m: margin of the pair status tests (Algorithm 2)
     pair_lost_margin: float = 0.005  # m: a coupled pair whose head is this far outside its polygon is lost
-    insert_lateral_tolerance: float = 0.001  # m: an anchor goes in (head_aligned, head_inserted) only when its
-                                     # head (then C_a) is this close to the opening's axis ...
+    insert_lateral_tolerance: float = 0.0007  # m: an anchor pair pushed home is coupled only when C_a is this
+                                     # close to the opening's axis ...
     insert_yaw_tolerance: float = 0.1    # rad: ... and the pair's headings agree this well
     insert_confirm_steps: int = 3    # consecutive control steps the head_inserted condition must hold
     insert_timeout: float = 4.0      # s: head_aligned for longer (a jammed anchor): back off, line up again
