@@ -204,7 +204,7 @@ class LabEmulated(unittest.TestCase):
         self.assertTrue(self.fault(robot="p21", fault="send_garbage", duration=0.0).accepted)
         with socket.socket() as s:
             s.bind(("127.0.0.99", 0))
-            s.connect(("127.0.0.1", int(rospy.get_param("/driver/driver/port"))))
+            s.connect(("127.0.0.1", int(rospy.get_param("/driver/bound_port"))))
             s.settimeout(3.0)
             self.assertEqual(s.recv(100), b"")            # closed by the driver
         time.sleep(1.0)
@@ -273,7 +273,7 @@ class LabEmulated(unittest.TestCase):
             for robots, code, text in cases:
                 rospy.set_param(names.ROBOTS_PARAM, robots)
                 proc = subprocess.run(["rosrun", "puzzlebot_driver", "driver_node", "__name:=bad_driver",
-                                       "_driver/port:=%d" % rospy.get_param("/driver/driver/port")],
+                                       "_driver/port:=%d" % rospy.get_param("/driver/bound_port")],
                                       capture_output=True, text=True, timeout=60)
                 self.assertEqual(proc.returncode, code, proc.stderr)
                 self.assertIn(text, proc.stdout + proc.stderr)

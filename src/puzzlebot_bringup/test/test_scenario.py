@@ -23,7 +23,9 @@ ROBOTS = ["pz1", "pz2"]
 
 
 @pytest.mark.parametrize("data, fragment", [
-    ({"name": "x", "start": {}, "steps": []}, "non-empty list"),
+    ({"name": "x", "start": {}, "steps": {}}, "expected a list of steps"),
+    ({"name": "x", "start": {}, "steps": [], "wrold": "step"}, "unknown key(s) wrold"),
+    ({"name": "x", "start": [], "steps": []}, "start: expected a mapping"),
     ({"name": "x", "start": {}}, "missing 'steps'"),
     ({"name": "x", "start": {}, "steps": [{"behavior": "dance"}]}, "unknown behaviour"),
     ({"name": "x", "start": {}, "steps": [{"behavior": "go_to_goal", "goals": {"pz9": [0, 0]}}]}, "unknown robot"),
@@ -37,6 +39,11 @@ def test_bad_scenarios_name_the_problem(data, fragment):
     with pytest.raises(ConfigError) as e:
         parse_scenario(data, ROBOTS)
     assert fragment in str(e.value)
+
+
+def test_a_scenario_without_steps_only_places_robots():
+    scenario = parse_scenario({"name": "idle", "start": {"pz1": [0, 0, 0]}, "world": "step", "steps": []}, ROBOTS)
+    assert scenario.steps == [] and scenario.world == "step"
 
 
 def test_summary_reports_outcome_and_errors():

@@ -76,10 +76,10 @@ def test_coupling_request_fields_convert():
         behaviors.COUPLE, behaviors.DECOUPLE, behaviors.DRIVE_ASSEMBLY)
 
 
-def test_pairs_predicted_and_markers_messages():
+def test_pairs_and_predicted_messages():
     from puzzlebot_common.geometry import RobotGeometry
     from puzzlebot_mpc.pairs import ANCHOR, HEAD_INSERTED, make_pair
-    from puzzlebot_mpc.ros_conversions import markers_msg, pairs_msg, predicted_msg
+    from puzzlebot_mpc.ros_conversions import pairs_msg, predicted_msg
 
     geo = RobotGeometry()
     pair = make_pair("pz1", "pz2", ANCHOR, geo, status=HEAD_INSERTED)
@@ -94,6 +94,26 @@ def test_pairs_predicted_and_markers_messages():
     assert pred.robots[0].poses[3].x == 0.03 and pred.dt == 0.1
     failed = MPCResult(np.zeros((2, 2)), X, False, "x", 1.0, 0, float("nan"), fallback="stop")
     assert predicted_msg(failed, ["pz1", "pz2"], rospy.Time(2, 0), 0.1).robots == []
-    poses = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.05, 0.0, 0.0)}
-    markers = markers_msg(res, ["pz1", "pz2"], [pair], poses, rospy.Time(2, 0))
-    assert [m.ns for m in markers.markers[1:]] == ["predicted", "predicted", "pairs"]
+
+
+def test_objectives_message_carries_goals_and_placed_slots():
+    from puzzlebot_mpc.behaviors import BehaviorManager, BehaviorRequest
+    from puzzlebot_mpc.ros_conversions import objectives_msg
+    from puzzlebot_mpc.settings import MPCSettings
+
+    m = BehaviorManager(["pz1", "pz2", "pz3"], MPCSettings())
+    empty = round_trip(objectives_msg(m.display_objectives(), rospy.Time(1, 0)))
+    assert empty.goals == [] and empty.slots == [] and empty.request_id == 0
+    m.request(BehaviorRequest("go_to_goal", robots=["pz2"], goals=[(0.3, -0.1)]), 0.0)
+    msg = round_trip(objectives_msg(m.display_objectives(), rospy.Time(1, 0)))
+    assert msg.behavior == "go_to_goal" and msg.goal_robots == ["pz2"] and (msg.goals[0].x, msg.goals[0].y) == (0.3, -0.1)
+    poses = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.09, 0.01, 0.1), "pz3": (-0.2, -0.02, 0.0)}
+    m.request(BehaviorRequest("couple", target="line"), 1.0, poses)
+    msg = round_trip(objectives_msg(m.display_objectives(), rospy.Time(2, 0)))
+    assert msg.target == "line" and sorted(msg.slot_robots) == ["pz1", "pz2", "pz3"] and msg.goals == []
+    slot = {r: (s.x, s.y, s.theta) for r, s in zip(msg.slot_robots, msg.slots)}
+    # a line: neighbouring slots one body apart, equal headings
+    order = sorted(slot, key=lambda r: -(slot[r][0] * np.cos(slot[r][2]) + slot[r][1] * np.sin(slot[r][2])))
+    for a, b in zip(order, order[1:]):
+        assert abs(np.hypot(slot[a][0] - slot[b][0], slot[a][1] - slot[b][1]) - 0.05) < 1e-9
+        assert abs(slot[a][2] - slot[b][2]) < 1e-9

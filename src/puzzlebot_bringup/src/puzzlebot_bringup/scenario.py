@@ -8,6 +8,7 @@ robot list and the scenario::
     scenario:
       name: goto3
       description: ...
+      world: flat                        # optional: sim world it needs (flat, step, gap); default flat
       start: {pz1: [x, y, yaw]}          # m, m, rad, world frame
       steps:
         - behavior: go_to_goal
@@ -32,15 +33,19 @@ robot list and the scenario::
           pair: [pz2, pz3]
           timeout: 60.0
 
+``steps: []`` is a scenario without steps: the robots are placed and left
+to the user (the runner reports that and waits).
+
 This module parses and checks scenarios and formats the end-of-run summary.
 """
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Tuple
 
 from puzzlebot_common.errors import ConfigError
 
+SCENARIO_KEYS = {"name", "description", "world", "start", "steps"}
 STEP_KEYS = {"behavior", "goals", "velocities", "tolerance", "timeout", "robots", "target", "slots", "pair",
              "velocity", "distance"}
 BEHAVIORS = ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly")
@@ -87,6 +92,7 @@ class Scenario:
     description: str
     start: Dict[str, list]
     steps: List[Step]
+    world: str = "flat"
 
 
 @dataclass
@@ -138,9 +144,17 @@ def parse_scenario(data, robots, where="scenario"):
     for key in ("name", "start", "steps"):
         if key not in data:
             raise ConfigError("%s: missing '%s'" % (where, key))
+    unknown = set(data) - SCENARIO_KEYS
+    if unknown:
+        raise ConfigError("%s: unknown key(s) %s; allowed: %s"
+                          % (where, ", ".join(sorted(map(str, unknown))), ", ".join(sorted(SCENARIO_KEYS))))
+    if not isinstance(data["start"], dict):
+        raise ConfigError("%s.start: expected a mapping robot -> [x, y, yaw], got %r" % (where, data["start"]))
+    if not isinstance(data.get("world", "flat"), str):
+        raise ConfigError("%s.world: expected a world name, got %r" % (where, data["world"]))
     steps_data = data["steps"]
-    if not isinstance(steps_data, list) or not steps_data:
-        raise ConfigError("%s.steps: expected a non-empty list of steps" % where)
+    if not isinstance(steps_data, list):
+        raise ConfigError("%s.steps: expected a list of steps ([] for none)" % where)
     steps = []
     for i, s in enumerate(steps_data):
         w = "%s.steps[%d]" % (where, i)
@@ -186,7 +200,8 @@ def parse_scenario(data, robots, where="scenario"):
             if step.distance <= 0 and step.timeout <= 0:
                 raise ConfigError("%s: drive_assembly needs a distance or a timeout > 0" % w)
         steps.append(step)
-    return Scenario(str(data["name"]), str(data.get("description", "")), data["start"], steps)
+    return Scenario(str(data["name"]), str(data.get("description", "")), data["start"], steps,
+                    data.get("world", "flat"))
 
 
 def format_summary(scenario, results, wall_seconds, sim_seconds):

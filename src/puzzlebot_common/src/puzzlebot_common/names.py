@@ -18,6 +18,10 @@ BEHAVIOR_STATUS_TOPIC = STACK_NS + "/mpc/behavior_status"
 SET_BEHAVIOR_SERVICE = STACK_NS + "/mpc/set_behavior"
 PREDICTED_TRAJECTORIES_TOPIC = STACK_NS + "/mpc/predicted_trajectories"
 MPC_MARKERS_TOPIC = STACK_NS + "/mpc/markers"
+#: puzzlebot_msgs/BehaviorObjectives: goals and target slots of the running behaviour (MPC node).
+MPC_OBJECTIVES_TOPIC = STACK_NS + "/mpc/objectives"
+#: visualization_msgs/MarkerArray: the rviz markers of the stack (puzzlebot_bringup markers node).
+MARKERS_TOPIC = STACK_NS + "/markers"
 ROBOTS_PARAM = STACK_NS + "/robots"
 SCENARIO_PARAM = STACK_NS + "/scenario"
 

@@ -204,7 +204,9 @@ class EmulatorParams:
     """Emulator node settings (``emulator`` mapping of config/emulator.yaml, minus motors)."""
 
     driver_host: str = "127.0.0.1"    # where the driver listens
-    port: int = 8080                  # the driver's TCP port
+    port: int = 8080                  # the driver's TCP port; 0: read it from port_param
+    port_param: str = "/driver/bound_port"  # with port 0: parameter where the driver publishes its port
+    port_wait: float = 30.0           # s (wall) to wait for port_param
     source_prefix: str = "127.0.0."   # robot with ip_octet N connects from <prefix>N (loopback)
     reconnect_period: float = 0.5     # s between connection attempts
     zero_on_disconnect: bool = False  # the lab firmware keeps its last PWM when the link drops
@@ -220,7 +222,7 @@ class EmulatorParams:
         return from_mapping(cls, data, where)
 
     def check(self, where="emulator"):
-        require_positive(self, ["reconnect_period", "physics_rate", "pose_rate", "spacing"], where)
+        require_positive(self, ["reconnect_period", "physics_rate", "pose_rate", "spacing", "port_wait"], where)
         if not 0 <= self.port <= 65535:
             raise ConfigError("%s.port: expected 0..65535, got %r" % (where, self.port))
         if self.noise_xy < 0 or self.noise_yaw < 0:

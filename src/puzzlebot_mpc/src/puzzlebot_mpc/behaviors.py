@@ -638,3 +638,31 @@ class BehaviorManager:
         else:
             self._message = "driving: %.3f m" % moved
         return [moved]
+
+    # -------------------------------------------------------------- display
+    def display_objectives(self):
+        """What the current (or last) behaviour was asked, for displays (rviz) and tools.
+
+        Kept after the behaviour ends, so a finished run still shows its goals
+        and target. ``slots``: the couple assignment's slots as placed (world
+        frame); the MPC aligns pairs, not slot positions, so only the slots'
+        relative poses are targets.
+        """
+        req, a = self._req, self._assignment
+        goals = [(n, tuple(g)) for n, g in zip(self._robots, req.goals)] if req.behavior == GO_TO_GOAL else []
+        slots = []
+        if req.behavior == COUPLE and a is not None and a.slots_world is not None:
+            robot_of = {s: r for r, s in a.slot_of.items()}
+            slots = [(robot_of[s], tuple(float(v) for v in a.slots_world[s])) for s in sorted(robot_of)]
+        return DisplayObjectives(self._request_id, req.behavior, self._state, goals,
+                                 a.target if req.behavior == COUPLE and a is not None else "", slots)
+
+
+@dataclass
+class DisplayObjectives:
+    request_id: int
+    behavior: str
+    state: int
+    goals: List[Tuple[str, Tuple[float, float]]]               # go_to_goal: (robot, (x, y)) world [m]
+    target: str                                                # couple: target name
+    slots: List[Tuple[str, Tuple[float, float, float]]]        # couple: (robot, slot (x, y, heading)) world

@@ -5,14 +5,11 @@ without a roscore.
 """
 
 from geometry_msgs.msg import Point, Pose2D, Twist
-from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker, MarkerArray
 
 from puzzlebot_common import names
-from puzzlebot_msgs.msg import (BehaviorStatus, ConnectionPair, ConnectionPairArray, PredictedTrajectories,
-                                RobotTrajectory, SolverStats)
+from puzzlebot_msgs.msg import (BehaviorObjectives, BehaviorStatus, ConnectionPair, ConnectionPairArray,
+                                PredictedTrajectories, RobotTrajectory, SolverStats)
 from puzzlebot_mpc.behaviors import BehaviorRequest
-from puzzlebot_mpc.pairs import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, world_point
 
 
 def request_from_srv(req):
@@ -56,38 +53,17 @@ def predicted_msg(result, robot_names, stamp, dt):
     return msg
 
 
-_STATUS_COLOURS = {DECOUPLED: (0.9, 0.2, 0.2), HEAD_ALIGNED: (0.95, 0.75, 0.1), HEAD_INSERTED: (0.1, 0.8, 0.2)}
-
-
-def markers_msg(result, robot_names, pairs, poses, stamp, z=0.03):
-    """rviz markers: one line strip per predicted trajectory, one line per connection pair
-    (between its connection points, coloured by status: red decoupled, yellow head aligned,
-    green coupled)."""
-    out = MarkerArray()
-    clear = Marker(action=Marker.DELETEALL)
-    clear.header.frame_id = names.WORLD_FRAME
-    out.markers.append(clear)
-    for i, name in enumerate(robot_names if result.success else []):
-        m = Marker(type=Marker.LINE_STRIP, action=Marker.ADD, ns="predicted", id=i)
-        m.header.stamp, m.header.frame_id = stamp, names.WORLD_FRAME
-        m.pose.orientation.w = 1.0
-        m.scale.x = 0.003
-        m.color = ColorRGBA(0.2, 0.5, 1.0, 0.9)
-        m.points = [Point(float(x[0]), float(x[1]), z) for x in result.predicted[i]]
-        out.markers.append(m)
-    for k, pair in enumerate(pairs):
-        pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
-        if pi is None or pj is None:
-            continue
-        a, b = world_point(pi, pair.point_i), world_point(pj, pair.point_j)
-        m = Marker(type=Marker.LINE_LIST, action=Marker.ADD, ns="pairs", id=k)
-        m.header.stamp, m.header.frame_id = stamp, names.WORLD_FRAME
-        m.pose.orientation.w = 1.0
-        m.scale.x = 0.004
-        m.color = ColorRGBA(*_STATUS_COLOURS[pair.status], 1.0)
-        m.points = [Point(float(a[0]), float(a[1]), z), Point(float(b[0]), float(b[1]), z)]
-        out.markers.append(m)
-    return out
+def objectives_msg(view, stamp):
+    """behaviors.DisplayObjectives -> puzzlebot_msgs/BehaviorObjectives."""
+    msg = BehaviorObjectives(request_id=view.request_id, behavior=view.behavior, state=view.state,
+                             target=view.target)
+    msg.header.stamp = stamp
+    msg.header.frame_id = names.WORLD_FRAME
+    msg.goal_robots = [r for r, _ in view.goals]
+    msg.goals = [Point(float(g[0]), float(g[1]), 0.0) for _, g in view.goals]
+    msg.slot_robots = [r for r, _ in view.slots]
+    msg.slots = [pose2d(sl) for _, sl in view.slots]
+    return msg
 
 
 def twist(v, w):

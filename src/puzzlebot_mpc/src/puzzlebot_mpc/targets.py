@@ -28,7 +28,7 @@ Assignment of robots to slots (documented in docs/mpc.md):
 
 import math
 from dataclasses import dataclass
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -197,6 +197,8 @@ class Assignment:
     pairs: list                    # ConnectionPair goal pairs (augmented)
     priority: Dict[Tuple[str, str], float]
     mst_edges: List[Tuple[str, str, float]]
+    slots_world: Optional[np.ndarray] = None   # (n, 3) slots as placed (world), for displays
+    target: str = ""                           # target name
 
 
 def assign(target, robots, poses, geometry, heading_weight=1.0):
@@ -236,7 +238,8 @@ def assign(target, robots, poses, geometry, heading_weight=1.0):
         priority[p.key] = float(paths[index[p.robot_i], index[p.robot_j]])
     return Assignment(list(robots), {robots[int(r)]: int(s) for r, s in mapping.items()},
                       (float(centre[0]), float(centre[1]), float(heading)), total, pairs, priority,
-                      [(robots[i], robots[j], d) for i, j, d in edges])
+                      [(robots[i], robots[j], d) for i, j, d in edges],
+                      place(target.slots, centre[0], centre[1], heading), target.name)
 
 
 def brute_force_assignment(cost):

@@ -256,7 +256,7 @@ class SimParams:
     cmd_timeout: float = 0.5         # s, sim time
     sync_topic: str = ""             # lockstep with a controller (empty: off)
     sync_period: float = 0.1         # s
-    sync_timeout: float = 2.0        # s, wall
+    sync_timeout: float = 10.0       # s, wall
     sync_startup_timeout: float = 60.0  # s, wall
     world: str = "flat"
     gui: bool = False

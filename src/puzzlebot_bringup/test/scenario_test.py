@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""Integration test: run the loaded scenario's steps through the MPC node (as the scenario runner
+does) and assert the outcome of every step, physically where the simulation can tell.
+
+Bounds: every step must succeed within its own `timeout` in simulated time (plus the runner's
+2 s of settling); no step may be refused.
+
+Checks after each step (private parameters of the test node select them):
+- couple: the step's k robots are joined by k - 1 coupled pairs in the MPC's statuses; with
+  ~physical (simulation), every coupled anchor pair is *seated in Bullet*: the sim's
+  /puzzlebot/sim/physical_pairs reports that anchor in that opening with both tips behind the
+  lips (STATUS_HEAD_INSERTED), not just the controller's belief;
+- drive_assembly: the lead robot's measured pose (vicon topic) moved at least `distance`; every
+  coupled pair of the assembly stayed coupled in every MPC status message during the drive and,
+  with ~physical, in every physical pairs message of the drive;
+- decouple: the pair is decoupled in the MPC's statuses and, with ~physical, its anchor is out
+  of the opening in Bullet (no physical pair) for ~release_hold s; every other coupled pair
+  stays seated;
+- ~final_z {robot: [min, max]}: each robot's body-centre height at the end (on the floor or on
+  a stage), from its vicon topic.
+"""
+
+import math
+import sys
+import time
+import unittest
+
+import rospy
+import rostest
+
+from puzzlebot_common import names
+from puzzlebot_common.node_utils import get_param, robot_list_from_param
+from puzzlebot_msgs.msg import ConnectionPair
+from puzzlebot_bringup.runner import SETTLE, Runner
+from puzzlebot_bringup.scenario import parse_scenario
+
+INSERTED = ConnectionPair.STATUS_HEAD_INSERTED
+WALL_LIMIT = 600.0   # s (wall), only so that a hung graph cannot hang the test
+
+
+def anchor_key(p):
+    """(anchor robot, opening robot) of an anchor pair; (robot_i, robot_j) of a knob pair."""
+    if p.type == ConnectionPair.TYPE_ANCHOR and p.anchor_robot:
+        return (p.anchor_robot, p.robot_j if p.anchor_robot == p.robot_i else p.robot_i)
+    return (p.robot_i, p.robot_j)
+
+
+def coupled(msg, robots=None):
+    """Pairs (keys) with status head_inserted in a ConnectionPairArray, among ``robots`` if given."""
+    return {anchor_key(p): p for p in (msg.pairs if msg else [])
+            if p.status == INSERTED and (robots is None or (p.robot_i in robots and p.robot_j in robots))}
+
+
+class ScenarioTest(unittest.TestCase):
+    def setUp(self):
+        self.robots = robot_list_from_param()
+        self.names = [r.name for r in self.robots]
+        self.scenario = parse_scenario(get_param(names.SCENARIO_PARAM, required=True), self.names,
+                                       where=names.SCENARIO_PARAM)
+        self.physical = get_param("~physical", True)
+        self.final_z = get_param("~final_z", {})
+        self.release_hold = get_param("~release_hold", 1.0)
+        self.runner = Runner(self.robots)
+        self.assertTrue(self.runner.connect(), "the MPC never solved a step (no poses?)")
+        self.wall_deadline = time.monotonic() + WALL_LIMIT
+
+    def log(self, text):
+        print("[%s] %s" % (self.scenario.name, text), flush=True)
+
+    def physical_coupled(self):
+        return coupled(self.runner.physical)
+
+    # --------------------------------------------------------------- checks
+    def check_couple(self, step):
+        robots = step.robots or self.names
+        self.runner.wait_sim(0.5)     # a few more statuses and physical pair messages of the final state
+        mpc = coupled(self.runner.pairs, robots)
+        self.assertEqual(len(mpc), len(robots) - 1, "MPC: %d coupled pair(s) among %s, expected %d: %s"
+                         % (len(mpc), robots, len(robots) - 1, sorted(mpc)))
+        if self.physical:
+            seated = self.physical_coupled()
+            anchors = [k for k, p in mpc.items() if p.type == ConnectionPair.TYPE_ANCHOR]
+            missing = [k for k in anchors if k not in seated]
+            self.log("physically seated: %s" % sorted(seated))
+            self.assertFalse(missing, "coupled for the MPC but not seated in Bullet: %s (physical: %s)"
+                             % (missing, sorted((anchor_key(p), p.status) for p in self.runner.physical.pairs)))
+        return mpc
+
+    def check_drive(self, step, before, t0, t1, start_pose):
+        lead = step.robots[0]
+        end = self.runner.poses[lead]
+        moved = math.hypot(end[0] - start_pose[0], end[1] - start_pose[1])
+        self.log("drive: %s moved %.3f m (measured), asked %.3f m" % (lead, moved, step.distance))
+        if step.distance > 0:
+            self.assertGreaterEqual(moved, step.distance - 1e-3)
+        with self.runner.lock:
+            mpc_log = [m for t, m in self.runner.pairs_log if t0 <= t <= t1]
+            phys_log = [m for t, m in self.runner.physical_log if t0 <= t <= t1]
+        self.assertTrue(mpc_log, "no connection pairs published during the drive")
+        for m in mpc_log:
+            lost = set(before) - set(coupled(m))
+            self.assertFalse(lost, "MPC: pair(s) %s not coupled at t = %.2f s during the drive"
+                             % (sorted(lost), m.header.stamp.to_sec()))
+        anchors = [k for k, p in before.items() if p.type == ConnectionPair.TYPE_ANCHOR]
+        if self.physical and anchors:
+            self.assertTrue(phys_log, "no physical pairs published during the drive")
+            unseated = [(m.header.stamp.to_sec(), sorted(set(anchors) - set(coupled(m)))) for m in phys_log
+                        if set(anchors) - set(coupled(m))]
+            self.log("drive: %d physical pair message(s), %d with a pair not seated"
+                     % (len(phys_log), len(unseated)))
+            self.assertFalse(unseated, "not seated in Bullet during the drive (t, pairs): %s" % unseated[:5])
+
+    def check_decouple(self, step, before):
+        pair = [k for k in before if set(k) == set(step.pair)]
+        self.assertTrue(pair, "%s was not coupled before the decouple step" % step.pair)
+        key = pair[0]
+        self.assertNotIn(key, coupled(self.runner.pairs), "MPC still reports %s coupled" % (key,))
+        if self.physical:
+            t0 = rospy.get_time()
+            self.runner.wait_sim(self.release_hold)
+            with self.runner.lock:
+                msgs = [m for t, m in self.runner.physical_log if t >= t0]
+            self.assertTrue(msgs, "no physical pairs published after the decouple")
+            inside = [m.header.stamp.to_sec() for m in msgs if key in {anchor_key(p) for p in m.pairs}]
+            self.assertFalse(inside, "%s's anchor is still in %s's opening in Bullet at t = %s"
+                             % (key[0], key[1], inside[:5]))
+            others = [k for k, p in before.items() if k != key and p.type == ConnectionPair.TYPE_ANCHOR]
+            unseated = [k for k in others if k not in self.physical_coupled()]
+            self.assertFalse(unseated, "other pairs came apart in Bullet: %s" % unseated)
+
+    # ----------------------------------------------------------------- test
+    def test_scenario(self):
+        self.log("%d step(s), robots %s, physical checks %s" % (len(self.scenario.steps), self.names,
+                                                                "on" if self.physical else "off (no Bullet)"))
+        sim0 = rospy.get_time()
+        for i, step in enumerate(self.scenario.steps):
+            before = coupled(self.runner.pairs)
+            start_pose = self.runner.poses.get(step.robots[0]) if step.robots else None
+            t0 = rospy.get_time()
+            result = self.runner.run_step(step, 0.0, self.wall_deadline)
+            t1 = rospy.get_time()
+            self.log("step %d %s: %s after %.2f s simulated: %s"
+                     % (i + 1, step.describe(), result.outcome, result.sim_seconds, result.message))
+            self.assertEqual(result.outcome, "succeeded", "step %d (%s): %s: %s"
+                             % (i + 1, step.describe(), result.outcome, result.message))
+            if step.timeout > 0:
+                self.assertLessEqual(result.sim_seconds, step.timeout + SETTLE)
+            if step.behavior == "couple":
+                self.check_couple(step)
+            elif step.behavior == "drive_assembly":
+                self.check_drive(step, before, t0, t1, start_pose)
+            elif step.behavior == "decouple":
+                self.check_decouple(step, before)
+        for name, (lo, hi) in sorted(self.final_z.items()):
+            z = self.runner.poses[name][2]
+            self.log("final height of %s: %.3f m (expected %.3f..%.3f)" % (name, z, lo, hi))
+            self.assertTrue(lo <= z <= hi, "%s ends at z = %.3f m, not in [%.3f, %.3f]" % (name, z, lo, hi))
+        self.log("passed in %.1f s simulated; %d failed MPC solve(s)"
+                 % (rospy.get_time() - sim0, self.runner.failed_solves))
+
+
+if __name__ == "__main__":
+    rospy.init_node("scenario_test", argv=sys.argv)
+    rostest.rosrun("puzzlebot_bringup", rospy.get_name().strip("/"), ScenarioTest)

@@ -1,0 +1,118 @@
+"""sim.launch, lab.launch and record.launch as roslaunch reads them (no roscore; the
+launch-time configuration command runs, so the workspace must be built)."""
+
+import os
+import subprocess
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from puzzlebot_common.config import load_yaml
+from puzzlebot_common.robots import parse_robot_list
+from puzzlebot_driver.params import driver_config, emulator_config
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+PKG = os.path.dirname(HERE)
+LAUNCH = {name: os.path.join(PKG, "launch", name + ".launch") for name in ("sim", "lab", "record", "replay")}
+
+
+def load_launch(name, **args):
+    roslaunch = pytest.importorskip("roslaunch")
+    import roslaunch.config
+    import roslaunch.xmlloader
+
+    config = roslaunch.config.ROSLaunchConfig()
+    argv = ["%s:=%s" % kv for kv in args.items()]
+    roslaunch.xmlloader.XmlLoader().load(LAUNCH[name], config, argv=argv, verbose=False)
+    return config
+
+
+def node_names(config):
+    return sorted(n.name for n in config.nodes)
+
+
+@pytest.mark.parametrize("name", sorted(LAUNCH))
+def test_every_arg_is_documented(name):
+    for a in ET.parse(LAUNCH[name]).getroot().findall("arg"):
+        if a.get("name").startswith("_"):          # internal values, not arguments
+            assert a.get("value") is not None
+            continue
+        assert a.get("doc"), "%s.launch: arg %s has no doc" % (name, a.get("name"))
+
+
+def test_sim_launch_defaults_and_options():
+    c = load_launch("sim")
+    assert node_names(c) == ["mpc", "scenario_runner", "sim"]
+    assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2", "pz3", "pz4"]
+    assert c.params["/sim/sim/world"].value == "flat" and c.params["/use_sim_time"].value is True
+    c = load_launch("sim", scenario="chain_step", robots="2", rviz="true", record="true", bag="/tmp/x.bag")
+    assert node_names(c) == ["markers", "mpc", "record", "rviz", "scenario_runner", "sim"]
+    robots = parse_robot_list(c.params["/puzzlebot/robots"].value)
+    assert [(r.name, r.pilot) for r in robots] == [("pz1", True), ("pz2", False)]
+    assert sorted(c.params["/puzzlebot/scenario"].value["start"]) == ["pz1", "pz2"]
+    assert c.params["/sim/sim/world"].value == "step"             # the scenario's world
+    record = [n for n in c.nodes if n.name == "record"][0]
+    assert record.args.startswith("-O /tmp/x.bag -e ")
+
+
+@pytest.mark.parametrize("launch, args, message", [
+    ("sim", ["robots:=0"], "sim.launch: robots:=0: the robot count must be at least 1"),
+    ("sim", ["scenario:=nope"], "sim.launch: unknown scenario 'nope'; known scenarios: "),
+    ("sim", ["world:=moon"], "sim.launch: world:=moon: unknown world 'moon'; known worlds: flat, gap, step"),
+    ("lab", ["robots:=/nonexistent/robots.yaml"], "lab.launch: robot list file /nonexistent/robots.yaml does not exist"),
+])
+def test_wrong_arguments_stop_roslaunch_with_one_clear_line(launch, args, message):
+    """What a user sees: the first line of roslaunch's output names the problem, no node starts."""
+    env = dict(os.environ, ROS_MASTER_URI="http://localhost:1")    # nothing may contact a master
+    proc = subprocess.run(["roslaunch", "puzzlebot_bringup", launch + ".launch"] + args, capture_output=True,
+                          text=True, timeout=120, env=env)
+    assert proc.returncode != 0
+    lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.startswith(launch + ".launch:")]
+    assert lines and lines[0].startswith(message), proc.stderr + proc.stdout
+    assert "started roslaunch server" not in proc.stdout
+
+
+def test_lab_launch_emulate_port_and_record():
+    lab = load_launch("lab", port="9123")
+    emu = load_launch("lab", emulate="true", port="0", record="true")
+    assert node_names(lab) == ["driver", "mpc"]
+    assert node_names(emu) == ["driver", "emulator", "mpc", "record"]
+    assert lab.params["/driver/driver/port"].value == 9123
+    assert emu.params["/emulator/emulator/port"].value == 0 and emu.params["/driver/bound_port"].value == 0
+    assert emu.params["/use_sim_time"].value is False
+    robots = parse_robot_list(emu.params["/puzzlebot/robots"].value)
+    assert all(r.ip_octet is not None for r in robots)
+    assert "/puzzlebot/scenario" not in emu.params
+    assert node_names(load_launch("lab", mpc="false")) == ["driver"]
+
+
+def test_lab_launch_scenario_and_robot_list_combine():
+    c = load_launch("lab", emulate="true", scenario="goto3", robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
+    robots = parse_robot_list(c.params["/puzzlebot/robots"].value)
+    assert [r.ip_octet for r in robots] == [41, 42, 43]      # the robot list wins over the scenario's
+    assert sorted(c.params["/puzzlebot/scenario"].value["start"]) == ["pz1", "pz2", "pz3"]
+    assert "scenario_runner" in node_names(c)
+    c = load_launch("lab", emulate="true", scenario="goto3", run_scenario="false",
+                    robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
+    assert "scenario_runner" not in node_names(c)
+
+
+def test_replay_launch_plays_with_the_runs_robots():
+    c = load_launch("replay", bag="/tmp/run.bag", scenario="couple2")
+    assert node_names(c) == ["markers", "play", "rviz"]
+    assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2"]
+    assert [n for n in c.nodes if n.name == "play"][0].args == "--clock -r 1.0 /tmp/run.bag"
+    lab = load_launch("replay", bag="/tmp/run.bag", rviz="false", robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
+    assert node_names(lab) == ["markers", "play"]
+    assert [r.ip_octet for r in parse_robot_list(lab.params["/puzzlebot/robots"].value)] == [41, 42, 43]
+
+
+def test_lab_robot_list_and_configs_parse():
+    robots = parse_robot_list(load_yaml(os.path.join(PKG, "config", "robots", "lab.yaml")))
+    for r in robots:
+        assert r.name == "p%d" % r.ip_octet and r.mocap_subject == r.name
+    driver = load_yaml(os.path.join(os.path.dirname(PKG), "puzzlebot_driver", "config", "driver.yaml"))
+    emulator = load_yaml(os.path.join(os.path.dirname(PKG), "puzzlebot_driver", "config", "emulator.yaml"))
+    cfg = driver_config(driver, robots)
+    assert set(cfg.gains) == {r.name for r in robots}
+    emulator_config(emulator, robots)
