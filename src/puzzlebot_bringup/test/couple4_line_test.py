@@ -1,14 +1,18 @@
 #!/usr/bin/env python3
-"""sim + MPC: four scattered robots couple into a line, the chain drives 0.3 m with every pair
-coupled, then pz2-pz3 decouples by wiggling. Coupling is checked three ways:
+"""sim + MPC in the Bullet simulation with physical anchors: four scattered robots couple into a
+line, the chain drives 0.3 m with every pair coupled, then pz2-pz3 decouples by wiggling.
 
-- the MPC's pair statuses (/puzzlebot/connection_pairs, Algorithm 2 on the measured poses);
-- geometrically from the measured poses (vicon topics), independently of the MPC: each coupled
-  pair's anchor head inside the opening robot's front triangle (+ eps), relative heading within
-  the anchor's freedom;
-- physically, when the simulation publishes /puzzlebot/sim/physical_pairs (Bullet anchors):
-  status HEAD_INSERTED for the coupled pairs. Without a publisher (box-only bodies) this check
-  is reported as not available, and the two checks above stand.
+Every claim is checked on the physical anchors, not only on the controller's belief:
+
+- /puzzlebot/sim/physical_pairs (read off the simulated anchor linkages): after coupling, after the
+  drive and after the decouple the chain's pairs are HEAD_INSERTED (both barbs in their slits); no
+  pair of the chain is ever out of its opening while driving; after the decouple pz2's anchor is out
+  of pz3's opening. Without that topic the test fails: physical coupling must be shown.
+- tf world -> <robot>/anchor vs <robot>/base_link: every anchor is still in its holder at the end
+  (a wiggle that tears an anchor out of its holder is not a decouple).
+- the MPC's pair statuses (/puzzlebot/connection_pairs, Algorithm 2 on the measured poses) and the
+  geometry of the measured poses (vicon topics), independently of the MPC.
+- zero failed MPC steps.
 """
 
 import math
@@ -17,7 +21,9 @@ import unittest
 
 import rospy
 import rostest
+import tf2_ros
 from geometry_msgs.msg import TransformStamped
+from puzzlebot_common import names
 from puzzlebot_common.geometry import RobotGeometry, yaw_from_quaternion
 from puzzlebot_msgs.msg import BehaviorStatus, ConnectionPair, ConnectionPairArray, SolverStats
 from puzzlebot_msgs.srv import SetBehavior, SetBehaviorRequest
@@ -26,26 +32,30 @@ from puzzlebot_mpc.ros_conversions import twist
 
 NAMES = ["pz1", "pz2", "pz3", "pz4"]
 CHAIN = [("pz1", "pz2"), ("pz2", "pz3"), ("pz3", "pz4")]
-PHYSICAL_TOPIC = "/puzzlebot/sim/physical_pairs"
-COUPLE_BOUND = 60.0    # s of simulated time
+AFTER_DECOUPLE = [("pz1", "pz2"), ("pz3", "pz4")]
+COUPLE_BOUND = 90.0    # s of simulated time
 DRIVE_DISTANCE = 0.3   # m
-WALL_LIMIT = 240.0     # s, only so a hung simulation cannot hang the test
-EPS = 0.003            # m, sim.launch's pair_epsilon
+DECOUPLE_BOUND = 60.0  # s of simulated time
+WALL_LIMIT = 240.0     # s per step, only so a hung simulation cannot hang the test
+ANCHOR_YAW_MAX = 1.0   # rad: an anchor turned further in its holder has flipped round (holder play +/-0.5)
 
 
 class CoupleFourIntoLine(unittest.TestCase):
     def setUp(self):
         self.geo = RobotGeometry()
         self.poses, self.status, self.pairs, self.physical, self.stats = {}, None, None, None, []
-        self.pair_log = []
+        self.pair_log, self.physical_log = [], []
+        self.eps = rospy.get_param("/mpc/mpc/pair_epsilon")
         for n in NAMES:
-            rospy.Subscriber("/vicon/%s/%s" % (n, n), TransformStamped, self.on_pose, callback_args=n)
-        rospy.Subscriber("/puzzlebot/mpc/behavior_status", BehaviorStatus, self.on_status)
-        rospy.Subscriber("/puzzlebot/connection_pairs", ConnectionPairArray, self.on_pairs)
-        rospy.Subscriber(PHYSICAL_TOPIC, ConnectionPairArray, self.on_physical)
-        rospy.Subscriber("/puzzlebot/mpc/solver_stats", SolverStats, self.stats.append)
-        rospy.wait_for_service("/puzzlebot/mpc/set_behavior", timeout=60.0)
-        self.call = rospy.ServiceProxy("/puzzlebot/mpc/set_behavior", SetBehavior)
+            rospy.Subscriber(names.vicon_topic(n), TransformStamped, self.on_pose, callback_args=n)
+        rospy.Subscriber(names.BEHAVIOR_STATUS_TOPIC, BehaviorStatus, self.on_status)
+        rospy.Subscriber(names.CONNECTION_PAIRS_TOPIC, ConnectionPairArray, self.on_pairs)
+        rospy.Subscriber(names.PHYSICAL_PAIRS_TOPIC, ConnectionPairArray, self.on_physical)
+        rospy.Subscriber(names.SOLVER_STATS_TOPIC, SolverStats, self.stats.append)
+        self.tf = tf2_ros.Buffer()
+        self.tf_listener = tf2_ros.TransformListener(self.tf)
+        rospy.wait_for_service(names.SET_BEHAVIOR_SERVICE, timeout=60.0)
+        self.call = rospy.ServiceProxy(names.SET_BEHAVIOR_SERVICE, SetBehavior)
         wall0 = time.monotonic()        # the MPC has poses once it solved a step (couple needs them)
         while not any(s.success for s in self.stats) and time.monotonic() - wall0 < 60.0:
             time.sleep(0.02)
@@ -63,6 +73,7 @@ class CoupleFourIntoLine(unittest.TestCase):
 
     def on_physical(self, msg):
         self.physical = msg
+        self.physical_log.append(msg)
 
     # ---------------------------------------------------------------- helpers
     def run_behavior(self, req, bound):
@@ -81,9 +92,10 @@ class CoupleFourIntoLine(unittest.TestCase):
         self.assertEqual(s.state, BehaviorStatus.SUCCEEDED, s.message)
         return rospy.get_time() - t0, s.message
 
-    def coupled(self, msg=None):
-        msg = msg or self.pairs
-        return sorted((p.robot_i, p.robot_j) for p in msg.pairs if p.status == ConnectionPair.STATUS_HEAD_INSERTED)
+    @staticmethod
+    def with_status(msg, status=ConnectionPair.STATUS_HEAD_INSERTED):
+        """(robot_i, robot_j) of the pairs of ``msg`` at ``status`` or above."""
+        return sorted((p.robot_i, p.robot_j) for p in msg.pairs if p.status >= status)
 
     def geometric(self, a, o):
         """(head margin in o's front triangle [m], relative heading [rad]) from the measured poses."""
@@ -95,18 +107,28 @@ class CoupleFourIntoLine(unittest.TestCase):
     def assert_geometrically_coupled(self, keys, when):
         for a, o in keys:
             margin, dth = self.geometric(a, o)
-            self.assertGreaterEqual(margin, -EPS, "%s: %s-%s head %.1f mm outside the triangle"
+            self.assertGreaterEqual(margin, -self.eps, "%s: %s-%s head %.1f mm outside the triangle"
                                     % (when, a, o, -1e3 * margin))
             self.assertLessEqual(abs(dth), self.geo.anchor_yaw_free, "%s: %s-%s turned %.2f rad" % (when, a, o, dth))
 
-    def assert_physically_coupled(self, keys, when):
-        if self.physical is None:
-            rospy.logwarn("%s: no %s publisher: physical coupling not checked (box-only simulation)"
-                          % (when, PHYSICAL_TOPIC))
-            return
-        seated = self.coupled(self.physical)
+    def assert_physically_seated(self, keys, when):
+        self.assertIsNotNone(self.physical, "%s: no message on %s: physical coupling not shown"
+                             % (when, names.PHYSICAL_PAIRS_TOPIC))
+        time.sleep(0.3)                 # the physical pairs of the final state (10 Hz)
+        seated = self.with_status(self.physical)
         for key in keys:
             self.assertIn(key, seated, "%s: %s-%s not physically seated; seated: %s" % ((when,) + key + (seated,)))
+
+    def assert_anchors_in_holders(self, when):
+        for n in NAMES:
+            tr = self.tf.lookup_transform(names.base_frame(n), names.anchor_frame(n), rospy.Time(0),
+                                          rospy.Duration(5.0)).transform
+            yaw = yaw_from_quaternion(tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w)
+            self.assertGreaterEqual(tr.translation.x, -self.geo.body_side / 2,
+                                    "%s: %s's anchor is out of its holder (x = %.1f mm)"
+                                    % (when, n, 1e3 * tr.translation.x))
+            self.assertLessEqual(abs(yaw), ANCHOR_YAW_MAX, "%s: %s's anchor turned %.2f rad in its holder"
+                                 % (when, n, yaw))
 
     # ------------------------------------------------------------------ test
     def test_couple_drive_decouple(self):
@@ -119,15 +141,16 @@ class CoupleFourIntoLine(unittest.TestCase):
         elapsed, message = self.run_behavior(SetBehaviorRequest(behavior="couple", target="line",
                                                                 timeout=COUPLE_BOUND), COUPLE_BOUND + 2)
         rospy.loginfo("coupled after %.1f s sim: %s" % (elapsed, message))
-        self.assertEqual(self.coupled(), CHAIN)
+        self.assertEqual(self.with_status(self.pairs), CHAIN)
         self.assert_geometrically_coupled(CHAIN, "after couple")
-        self.assert_physically_coupled(CHAIN, "after couple")
+        self.assert_physically_seated(CHAIN, "after couple")
         margins = {"%s-%s" % k: round(1e3 * self.geometric(*k)[0], 1) for k in CHAIN}
         rospy.loginfo("head margins in the triangles after coupling [mm]: %s" % margins)
 
         # 2. the chain drives 0.3 m forward with every pair coupled at every step
         start = self.poses["pz1"]
         self.pair_log.clear()
+        self.physical_log.clear()
         req = SetBehaviorRequest(behavior="drive_assembly", robots=["pz1"], distance=DRIVE_DISTANCE, timeout=30.0)
         req.velocities = [twist(0.03, 0.0)]
         elapsed, message = self.run_behavior(req, 32.0)
@@ -136,21 +159,24 @@ class CoupleFourIntoLine(unittest.TestCase):
         self.assertGreaterEqual(moved, DRIVE_DISTANCE)
         self.assertTrue(self.pair_log)
         for msg in self.pair_log:
-            self.assertEqual(self.coupled(msg), CHAIN, "a pair decoupled while driving")
+            self.assertEqual(self.with_status(msg), CHAIN, "the MPC lost a pair while driving")
+        self.assertGreater(len(self.physical_log), 10 * 0.5 * elapsed, "too few physical_pairs messages")
+        for msg in self.physical_log:     # no anchor ever left its opening
+            self.assertEqual(self.with_status(msg, ConnectionPair.STATUS_HEAD_ALIGNED), CHAIN,
+                             "an anchor left its opening while driving (t = %.1f s)" % msg.header.stamp.to_sec())
         self.assert_geometrically_coupled(CHAIN, "after the drive")
-        self.assert_physically_coupled(CHAIN, "after the drive")
+        self.assert_physically_seated(CHAIN, "after the drive")
 
         # 3. the named pair pz2-pz3 decouples by wiggling; the others stay coupled
         elapsed, message = self.run_behavior(SetBehaviorRequest(behavior="decouple", pair=["pz2", "pz3"],
-                                                                timeout=60.0), 62.0)
+                                                                timeout=DECOUPLE_BOUND), DECOUPLE_BOUND + 2)
         rospy.loginfo("decoupled after %.1f s sim: %s" % (elapsed, message))
-        self.assertEqual(self.coupled(), [("pz1", "pz2"), ("pz3", "pz4")])
-        pair = pr.make_pair("pz2", "pz3", pr.ANCHOR, self.geo)
-        outside = pr.head_margin(pair, self.poses["pz2"], self.poses["pz3"], self.geo.footprint())
-        self.assertLess(outside, -EPS, "pz2's anchor head is still in pz3")
-        self.assert_geometrically_coupled([("pz1", "pz2"), ("pz3", "pz4")], "after decouple")
-        if self.physical is not None:
-            self.assertNotIn(("pz2", "pz3"), self.coupled(self.physical))
+        self.assertEqual(self.with_status(self.pairs), AFTER_DECOUPLE)
+        self.assert_geometrically_coupled(AFTER_DECOUPLE, "after decouple")
+        self.assert_physically_seated(AFTER_DECOUPLE, "after decouple")
+        out = self.with_status(self.physical, ConnectionPair.STATUS_HEAD_ALIGNED)
+        self.assertNotIn(("pz2", "pz3"), out, "pz2's anchor is still in pz3's opening")
+        self.assert_anchors_in_holders("after decouple")
 
         steps = [s for s in self.stats if s.header.stamp.to_sec() >= t_start]
         self.assertGreater(len(steps), 100)

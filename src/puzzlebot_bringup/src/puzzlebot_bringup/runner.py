@@ -27,6 +27,7 @@ from puzzlebot_bringup.scenario import StepResult
 
 STATUS_TEXT = {ConnectionPair.STATUS_DECOUPLED: "decoupled", ConnectionPair.STATUS_HEAD_ALIGNED: "head aligned",
                ConnectionPair.STATUS_HEAD_INSERTED: "coupled"}
+PHYSICAL_TEXT = {ConnectionPair.STATUS_HEAD_ALIGNED: "head in", ConnectionPair.STATUS_HEAD_INSERTED: "seated"}
 POLL = 0.01   # s (wall) between checks of the behaviour status
 SETTLE = 2.0  # s of simulated time added to a step's timeout before the runner gives up on its status
 
@@ -134,4 +135,8 @@ class Runner:
             if name in self.poses:
                 errors[name] = math.hypot(self.poses[name][0] - goal[0], self.poses[name][1] - goal[1])
         pairs = pairs_text(self.pairs) if step.behavior in ("couple", "decouple", "drive_assembly") else ""
+        if pairs and self.physical is not None:      # simulation: the anchors themselves
+            pairs += "; physically: " + (", ".join(
+                "%s->%s %s" % (p.robot_i, p.robot_j, PHYSICAL_TEXT.get(p.status, "?")) for p in self.physical.pairs)
+                or "no anchor in an opening")
         return StepResult(step, outcome, message, rospy.get_time() - t0, errors, pairs)

@@ -12,10 +12,27 @@ Behaviours:
 - ``couple``: the robots form a target configuration (Algorithm 3: goal
   pairs from the target and the start poses, conflict-free active pairs,
   Algorithm 2 status updates). Succeeds when every goal pair is coupled;
-- ``decouple``: the named coupled pair separates: its anchor robot wiggles,
+- ``decouple``: the named coupled anchor pair separates. Phase *wiggle*: the
+  anchor robot a receives the paper's wiggle open loop,
   ``v = wiggle_v_bias, w = wiggle_w_amplitude sin(2 pi t / wiggle_period)``
-  (paper, eq. "wiggle"), its partner holds. Succeeds when the anchor head is
-  ``decouple_clearance`` outside the partner's footprint (+ eps);
+  (eq. "wiggle"; outside the MPC's own limits and butterfly set, within the
+  hardware limits), in attempts: when a period did not free the anchor, a
+  backs into o for a moment (the anchor goes back in) and wiggles again, to
+  the other side first (:func:`wiggle`); the MPC drives the robots coupled
+  to a straight on at a's speed (so they neither pull on a's front nor turn
+  with it), the opening robot o creeps back into its own assembly
+  at ``decouple_creep`` (o alone holds still) and the rest of o's assembly
+  holds. Released when, from the measured poses, a's anchor point C_a is
+  farther than anchor_length + ``decouple_clearance`` + eps from o's opening
+  point C_o on ``decouple_confirm_steps`` steps in a row: an anchor that
+  slides out of its holder and turns in it cannot reach into the opening
+  from there (the head point H_a alone is not enough: when a turns against
+  o, H_a leaves o's footprint sideways while the anchor, free to turn in its
+  holder, is still in).
+  Phase *settle* (``decouple_settle_time``): a and o push back into their own
+  assemblies at ``decouple_settle_speed`` (away from each other; a robot
+  without an assembly rests), which straightens and re-seats the anchors the
+  wiggle bent; then it succeeds;
 - ``drive_assembly``: the assembly of the named robots drives as one body
   with twist (v, w) given in the first robot's frame: the first robot
   tracks (v, w), every other member the rigid-body speed at its own position
@@ -76,6 +93,44 @@ class BehaviorStatus:
     errors: List[float] = field(default_factory=list)   # per robot; go_to_goal: distance [m]
 
 
+def wiggle(settings, t, relative_heading=None):
+    """The anchor robot's command (v [m/s], w [rad/s], phase) ``t`` seconds into a decouple.
+
+    Attempts follow each other: ``wiggle_cycles`` periods of wiggling (phase
+    "wiggle"; the sign flips every period with ``wiggle_alternate``: the
+    heading swings to both sides in turn), then ``decouple_reseat_time`` s
+    backing into the partner at ``decouple_reseat_speed`` (phase "reseat": an
+    anchor caught half out with both barbs flared goes back in, and the next
+    attempt starts afresh). ``decouple_reseat_time`` 0: one endless wiggle.
+
+    The wiggle is the paper's ``(v_bias, +-w_max sin(B tau))`` (B = 2 pi /
+    wiggle_period) when ``wiggle_heading_amplitude`` is 0 or the relative
+    heading is unknown. Otherwise it swings the *relative* heading of the pair
+    (``relative_heading`` [rad], anchor robot minus partner, from the poses)
+    along ``A sin(B tau)``, A = wiggle_heading_amplitude: ``w = A B cos(B tau)
+    + k (A sin(B tau) - relative_heading)`` limited to +-w_max, k =
+    wiggle_heading_gain. The open-loop wiggle keeps turning when the anchor
+    blocks the turn and then over-rotates on the way back (in the simulation
+    the anchor flips round in its holder); the closed-loop one turns the
+    anchor just past its holder's play, where one barb takes the pull.
+    """
+    s = settings
+    wiggling = s.wiggle_period * s.wiggle_cycles
+    attempt = wiggling + s.decouple_reseat_time
+    k = int(math.floor(t / attempt)) if s.decouple_reseat_time > 0 else 0
+    tau = t - k * attempt
+    if tau >= wiggling:
+        return -s.decouple_reseat_speed, 0.0, "reseat"
+    cycle = k * s.wiggle_cycles + int(math.floor(tau / s.wiggle_period))
+    sign = -1.0 if s.wiggle_alternate and cycle % 2 else 1.0
+    b = 2 * math.pi / s.wiggle_period
+    if s.wiggle_heading_amplitude > 0 and relative_heading is not None:
+        a = sign * s.wiggle_heading_amplitude
+        w = a * b * math.cos(b * tau) + s.wiggle_heading_gain * (a * math.sin(b * tau) - relative_heading)
+        return s.wiggle_v_bias, max(-s.wiggle_w_amplitude, min(s.wiggle_w_amplitude, w)), "wiggle"
+    return s.wiggle_v_bias, sign * s.wiggle_w_amplitude * math.sin(b * tau), "wiggle"
+
+
 def _finite(values):
     return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
 
@@ -94,7 +149,8 @@ class BehaviorManager:
         self.index = {name: i for i, name in enumerate(self.names)}
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
-        self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin)
+        self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin,
+                                             settings.seating())
         self.targets = dict(targets or {})
         self._request_id = 0
         self._req = BehaviorRequest(STOP)
@@ -104,6 +160,9 @@ class BehaviorManager:
         self._message = "no behaviour requested yet"
         self._static = Objectives.stop_all(len(self.names))
         self._decoupling = None          # pair being decoupled
+        self._released_at = None         # decouple: time the pair separated (settle phase from then on)
+        self._release_count = 0          # decouple: consecutive steps the release was seen
+        self._o_side = []                # decouple: the opening robot's assembly
         self._assembly = []              # drive_assembly / decouple followers
         self._start_pose = None
         self._assignment = None
@@ -219,6 +278,13 @@ class BehaviorManager:
             raise BehaviorError("decouple: %s and %s are not coupled; coupled pairs: %s"
                                 % (req.pair[0], req.pair[1],
                                    ", ".join("%s-%s" % p.robots for p in self.pairs.coupled.values()) or "none"))
+        if pair.type != pr.ANCHOR:
+            raise BehaviorError("decouple: %s-%s is a knob-hole coupling (rigid); only anchor pairs are "
+                                "decoupled by wiggling" % pair.robots)
+        others = [p for p in self.pairs.coupled.values() if p.key != pair.key]
+        if pair.robot_j in pr.assembly_of(pair.robot_i, self.names, others):
+            raise BehaviorError("decouple: %s and %s are also coupled through other robots; the pair cannot "
+                                "separate on its own" % pair.robots)
         self._need_poses(list(req.pair), poses, "decouple")
         return pair
 
@@ -246,7 +312,7 @@ class BehaviorManager:
             for k, name in enumerate(robots):
                 obj.velocity[self.index[name]] = req.velocities[k]
         # accepted: replace the running behaviour
-        self._finish_decouple()
+        self._finish_decouple(poses)
         self.pairs.clear_goals()
         self._request_id += 1
         self._req, self._robots, self._start = req, robots, now
@@ -263,11 +329,12 @@ class BehaviorManager:
             self.pairs.remove_coupled(decoupling.key)
             decoupling.status = pr.HEAD_INSERTED
             self._decoupling = decoupling
+            self._released_at = None
+            self._release_count = 0
             self._robots = list(decoupling.robots)
-            self._assembly = pr.assembly_of(decoupling.robot_i, self.names, self.pairs.coupled.values())
-            for m in self._assembly:       # robots coupled to the wiggling robot follow it
-                if m != decoupling.robot_i:
-                    self._static.velocity_mask[self.index[m]] = self.settings.follower_rest_scale
+            coupled = self.pairs.coupled.values()
+            self._assembly = pr.assembly_of(decoupling.robot_i, self.names, coupled)
+            self._o_side = pr.assembly_of(decoupling.robot_j, self.names, coupled)
         if req.behavior == DRIVE_ASSEMBLY:
             group = set()
             for r in robots:
@@ -287,12 +354,20 @@ class BehaviorManager:
         if poses is not None and self._decoupled(d, poses) is False:
             self.pairs.add_coupled(d)
 
-    def _decoupled(self, pair, poses):
+    def _separation(self, pair, poses):
+        """Distance [m] between a's anchor point C_a and o's opening point C_o (None: no pose)."""
         pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
         if pi is None or pj is None:
             return None
-        margin = pr.head_margin(pair, pi, pj, self.geometry.footprint())
-        return margin < -(self.settings.pair_epsilon + self.settings.decouple_clearance)
+        return pr.alignment_error(pair, pi, pj)[0]
+
+    def _decoupled(self, pair, poses):
+        """True when C_a is farther than anchor_length + decouple_clearance + eps from C_o (None: no pose)."""
+        d = self._separation(pair, poses)
+        if d is None:
+            return None
+        s = self.settings
+        return d > self.geometry.anchor_length + s.decouple_clearance + s.pair_epsilon
 
     def coupling(self):
         """True while a couple behaviour runs (active pairs are assigned every step)."""
@@ -316,7 +391,7 @@ class BehaviorManager:
         if self._state == RUNNING and self._req.behavior == COUPLE:
             self._couple_objectives(obj)
         elif self._state == RUNNING and self._req.behavior == DECOUPLE and self._decoupling is not None:
-            obj.velocity = self._wiggle_profile(now)
+            self._decouple_objectives(obj, now, poses)
         elif self._state == RUNNING and self._req.behavior == DRIVE_ASSEMBLY and poses is not None:
             obj.velocity = self._assembly_velocities(poses)
             leads = set(self._req.robots[:1])
@@ -359,15 +434,57 @@ class BehaviorManager:
                     for m in pr.assembly_of(r, self.names, self.pairs.coupled.values()):
                         obj.velocity_mask[self.index[m]] = hold
 
+    def _decouple_objectives(self, obj, now, poses=None):
+        """Wiggle phase: a wiggles open loop, its assembly drives straight on at v_bias, o creeps back into
+        its assembly, which holds. Settle phase: a and o push back into their assemblies, which hold."""
+        s, d = self.settings, self._decoupling
+        a, o = self.index[d.robot_i], self.index[d.robot_j]
+        hold = math.sqrt(s.hold_scale)
+        for m in self._assembly + self._o_side:
+            obj.velocity_mask[self.index[m]] = hold
+        # a robot pushes back into its own assembly only when it has one (alone, it would only drag its partner)
+        a_push = s.decouple_settle_speed if len(self._assembly) > 1 else 0.0
+        o_push = s.decouple_settle_speed if len(self._o_side) > 1 else 0.0
+        if self._released_at is None:
+            obj.velocity = self._wiggle_profile(now)
+            v, w, phase = self._wiggle(now, poses)
+            obj.open_loop[a] = (v, w)
+            for m in self._assembly:       # a's partners in front go along straight (back in while it reseats)
+                if m != d.robot_i:
+                    obj.velocity[self.index[m]] = (v, 0.0)
+                    obj.velocity_mask[self.index[m]] = 1.0
+            obj.velocity[o] = (-s.decouple_creep if o_push else 0.0, 0.0)
+        else:
+            obj.velocity[a] = (a_push, 0.0)
+            obj.velocity[o] = (-o_push, 0.0)
+        obj.velocity_mask[a] = obj.velocity_mask[o] = 1.0
+
+    def wiggle_command(self, now, poses=None):
+        """The paper's wiggle (eq. "wiggle") at time ``now`` [s]: (v_bias, w_max sin(B t)), t since the
+        decouple request, B = 2 pi / period. Sent open loop to the anchor robot (see :func:`wiggle`).
+
+        With ``wiggle_alternate`` the sign flips every period (w stays continuous: sin is zero there),
+        so the heading swings to both sides in turn instead of always to the same side.
+        """
+        return self._wiggle(now, poses)[:2]
+
+    def _wiggle(self, now, poses):
+        d = self._decoupling
+        pi, pj = (poses.get(d.robot_i), poses.get(d.robot_j)) if poses else (None, None)
+        rel = None if pi is None or pj is None else math.remainder(pi[2] - pj[2], 2 * math.pi)
+        return wiggle(self.settings, (now if now is not None else self._start) - self._start, rel)
+
     def _wiggle_profile(self, now):
+        """The wiggle over the horizon, within the MPC's own limits: the MPC's prediction of the anchor
+        robot (its partners react to it), while the robot itself receives :meth:`wiggle_command`."""
         s, h, n = self.settings, self.settings.horizon, len(self.names)
         vel = np.zeros((n, h, 2))
         d = self._decoupling
         i = self.index[d.robot_i]
         t = (now if now is not None else self._start) - self._start
-        tk = t + s.dt * np.arange(1, h + 1)
-        vel[i, :, 0] = s.wiggle_v_bias
-        vel[i, :, 1] = s.wiggle_w_amplitude * np.sin(2 * math.pi * tk / s.wiggle_period)
+        for k in range(h):
+            v, w, _ = wiggle(s, t + s.dt * (k + 1))
+            vel[i, k] = (float(np.clip(v, -s.v_max, s.v_max)), float(np.clip(w, -s.w_max, s.w_max)))
         return vel
 
     def _assembly_velocities(self, poses):
@@ -415,7 +532,7 @@ class BehaviorManager:
                 self._requeue_lost(lost)
                 errors = self._couple_status(now, poses, newly, elapsed)
             elif req.behavior == DECOUPLE:
-                errors = self._decouple_status(poses, elapsed)
+                errors = self._decouple_status(now, poses, elapsed)
             elif req.behavior == DRIVE_ASSEMBLY:
                 errors = self._drive_status(poses, lost, elapsed)
             if self._state == RUNNING and req.timeout and elapsed >= req.timeout:
@@ -477,7 +594,7 @@ class BehaviorManager:
                 ", ".join(p.describe() for p in self.pairs.active) or "none")
         return errors
 
-    def _decouple_status(self, poses, elapsed):
+    def _decouple_status(self, now, poses, elapsed):
         d = self._decoupling
         if d is None:
             return []
@@ -485,13 +602,21 @@ class BehaviorManager:
         if pi is None or pj is None:
             return [float("nan")]
         margin = pr.head_margin(d, pi, pj, self.geometry.footprint())
-        if self._decoupled(d, poses):
-            d.status = pr.DECOUPLED
+        sep = self._separation(d, poses)
+        if self._released_at is None:
+            self._release_count = self._release_count + 1 if self._decoupled(d, poses) else 0
+            if self._release_count >= self.settings.decouple_confirm_steps:
+                self._released_at = now
+                d.status = pr.DECOUPLED
+                self._release_message = "%s-%s decoupled after %.2f s (C_a %.1f mm from C_o, anchor head " \
+                    "%.1f mm outside %s)" % (d.robot_i, d.robot_j, elapsed, 1e3 * sep, -1e3 * margin, d.robot_j)
+        if self._released_at is None:
+            self._message = "wiggling %s out of %s (C_a %.1f mm from C_o)" % (d.robot_i, d.robot_j, 1e3 * sep)
+        elif now - self._released_at >= self.settings.decouple_settle_time - 1e-9:
             self._decoupling = None
-            self._succeed("%s-%s decoupled after %.2f s (anchor head %.1f mm outside %s)"
-                          % (d.robot_i, d.robot_j, elapsed, -1e3 * margin, d.robot_j))
+            self._succeed(self._release_message + "; assemblies settled")
         else:
-            self._message = "wiggling %s out of %s (head %.1f mm inside)" % (d.robot_i, d.robot_j, 1e3 * margin)
+            self._message = self._release_message + "; settling"
         return [-margin]
 
     def _drive_status(self, poses, lost, elapsed):

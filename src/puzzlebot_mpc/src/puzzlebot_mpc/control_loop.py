@@ -14,7 +14,8 @@ Safety rules, applied every step:
   accepted sample is rejected (the caller logs the returned reason);
 - a robot without a pose newer than ``settings.pose_timeout`` is commanded
   to zero and left out of its behaviour until fresh poses return;
-- a failed solve commands zero to every robot (``fallback == "stop"``).
+- a failed solve commands zero to every robot (``fallback == "stop"``), open-loop
+  commands (the decoupling wiggle) included.
 """
 
 import math
@@ -89,7 +90,7 @@ class ControlLoop:
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
         self.poses = PoseBook(self.names, settings.pose_timeout)
-        self.pairs = PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin)
+        self.pairs = PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating())
         self.behaviors = BehaviorManager(self.names, settings, self.geometry, self.pairs, targets)
         self.mpc = MultiRobotMPC(settings, len(self.names)).setup()
         self._last_cmd = np.zeros((len(self.names), 2))
@@ -116,7 +117,7 @@ class ControlLoop:
     def step(self, now):
         n = len(self.names)
         poses = self.fresh_poses(now)
-        newly, lost = self.pairs.update(poses)
+        newly, lost = self.pairs.update(poses, now)
         status = self.behaviors.update(now, poses, newly, lost)
         stale = [name for name in self.names if poses[name] is None]
         if len(stale) == n:
@@ -148,6 +149,9 @@ class ControlLoop:
                 if self.names[p.i] in stale or self.names[p.j] in stale:
                     p.active = False
         result = self.mpc.make_step(x0, obj)
+        if result.success:              # open-loop commands (the wiggle) only while the MPC runs normally
+            for i, (v, w) in obj.open_loop.items():
+                result.commands[i] = (v, w)
         for i, name in enumerate(self.names):
             if poses[name] is None:
                 result.commands[i] = 0.0

@@ -36,7 +36,7 @@ import itertools
 import math
 import time
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import casadi as ca
 import numpy as np
@@ -80,6 +80,10 @@ class Objectives:
     velocity_mask: (N,) bool or weight scale, or (N, 2) per component (v, w).
     pairs: pair slots (alignment and coupling). A robot without a goal,
     velocity or active pair is driven to rest.
+    open_loop: robot index -> (v [m/s], w [rad/s]) sent to that robot instead
+    of the MPC's command this step (the paper's wiggle is an open-loop
+    command, outside the MPC's velocity limits and butterfly set); applied by
+    control_loop.ControlLoop after a successful solve only.
     """
 
     goal: np.ndarray
@@ -87,6 +91,7 @@ class Objectives:
     velocity: np.ndarray
     velocity_mask: np.ndarray
     pairs: List[PairObjective] = field(default_factory=list)
+    open_loop: Dict[int, Tuple[float, float]] = field(default_factory=dict)
 
     @classmethod
     def stop_all(cls, n):

@@ -235,6 +235,10 @@ class Problem:
                     ineq.append(ca.vertcat(d - lim * s.dt, -d - lim * s.dt))
             if s.butterfly:
                 self._butterfly(ineq, X(0, i), bsign[i * (h + 1)], z[int(L.sb_idx[0, i])], ratio)
+            # the command sent now tracks the reference too (its stage-1 value): without this term the
+            # command is the one free velocity of the plan, and a coupled pair's keeping cost spent it
+            # on a gap that the bodies' contact cannot close (a driving chain's lead stalled)
+            res.append(vel_on[i, :].T * math.sqrt(s.w_velocity) * (X(0, i)[3:5] - vref[i * h, :].T))
         for k in range(1, h + 1):
             terminal = k == h
             w_goal = s.w_goal_terminal if terminal else s.w_goal_stage

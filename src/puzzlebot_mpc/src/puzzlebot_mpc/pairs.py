@@ -28,8 +28,14 @@ for a kinematic plant where bodies may overlap:
 - decoupled -> head_aligned when ``head`` is inside robot_j's footprint + eps,
   through the opening;
 - head_aligned -> head_inserted when ``C_i`` is inside robot_j's footprint + eps,
-  through the opening;
-- head_aligned -> decoupled when ``head`` leaves robot_j's footprint + eps;
+  through the opening and *lined up* -- C_i's lateral offset from the
+  opening's axis and the pair's heading error within the seating tolerances
+  (:class:`Seating`: an anchor pushed home askew leaves a barb outside its
+  slit) -- on ``confirm_steps`` consecutive updates (measurement noise must
+  not declare a skewed anchor seated);
+- head_aligned -> decoupled when ``head`` leaves robot_j's footprint + eps, or
+  when the pair has been head_aligned for ``align_timeout`` s without being
+  inserted (a jammed anchor: the docking robot backs off and lines up again);
 - a KNOB pair goes decoupled -> head_inserted when the knob centre is inside
   robot_j's knob region (RobotGeometry.knob_region) + eps with a heading
   error of at most knob_yaw_tolerance.
@@ -59,6 +65,20 @@ STATUS_NAMES = {DECOUPLED: "decoupled", HEAD_ALIGNED: "head_aligned", HEAD_INSER
 _POINT_TOL = 1e-6   # m, rad: how exactly a given connection point must match a known one
 
 
+@dataclass(frozen=True)
+class Seating:
+    """How precisely an anchor pair must be lined up to go in (Algorithm 2's extra conditions).
+
+    The defaults impose nothing (Algorithm 2 as in the paper); the MPC's
+    settings give the values (``insert_*`` in config/mpc.yaml).
+    """
+
+    lateral: float = math.inf        # m: |lateral offset| of the head from the opening's axis
+    yaw: float = math.inf            # rad: |heading error| of the pair
+    confirm_steps: int = 1           # consecutive updates the head_inserted condition must hold
+    align_timeout: float = math.inf  # s: head_aligned longer than this without insertion -> decoupled
+
+
 @dataclass
 class ConnectionPair:
     """One augmented connection pair (Algorithm 1); see the module docstring."""
@@ -70,6 +90,8 @@ class ConnectionPair:
     point_j: np.ndarray                # C_j (x, y, heading) in robot_j's body frame
     head: np.ndarray                   # head point (x, y) in robot_i's body frame
     status: int = DECOUPLED
+    since: Optional[float] = None      # time [s] of the last status change (None: unknown)
+    confirmed: int = 0                 # consecutive updates the head_inserted condition held
 
     @property
     def key(self):
@@ -171,13 +193,26 @@ def through_opening(pair, pose_i, pose_j, geometry, eps):
     return abs(q[1]) <= geometry.opening_width / 2.0 + eps and dth <= geometry.anchor_yaw_free
 
 
+def lined_up(pair, pose_i, pose_j, seating, point=None):
+    """The pair's ``point`` (default its head) lies within ``seating.lateral`` of robot_j's opening axis
+    and its heading error is within ``seating.yaw``."""
+    q = point_in_robot(pose_j, world_point(pose_i, pair.head if point is None else point))
+    return (abs(q[1] - pair.point_j[1]) <= seating.lateral
+            and abs(alignment_error(pair, pose_i, pose_j)[1]) <= seating.yaw)
+
+
 def yaw_limit(pair, geometry):
     """Largest relative heading [rad] a coupled pair keeps (anchor freedom, or the knob's tolerance)."""
     return geometry.anchor_yaw_free if pair.type == ANCHOR else geometry.knob_yaw_tolerance
 
 
-def update_status(pair, pose_i, pose_j, geometry, eps):
-    """Algorithm 2 for one pair (not yet coupled): the new status."""
+def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=None):
+    """Algorithm 2 for one pair (not yet coupled): the new status.
+
+    ``seating``: the lining-up conditions and the jam timeout (Seating);
+    ``now`` [s]: the time, for the timeout (None: no timeout). Updates
+    ``pair.confirmed`` (the count of consecutive inserted readings).
+    """
     footprint = geometry.footprint()
     if pair.type == KNOB:
         inside = head_margin(pair, pose_i, pose_j, geometry.knob_region()) >= -eps
@@ -185,15 +220,23 @@ def update_status(pair, pose_i, pose_j, geometry, eps):
         return HEAD_INSERTED if inside and aligned else DECOUPLED
     status = pair.status
     if status == DECOUPLED:
+        pair.confirmed = 0
         if head_margin(pair, pose_i, pose_j, footprint) >= -eps and through_opening(pair, pose_i, pose_j,
                                                                                      geometry, eps):
             return HEAD_ALIGNED
         return DECOUPLED
     if status == HEAD_ALIGNED:
-        if connection_margin(pair, pose_i, pose_j, footprint) >= -eps and through_opening(
-                pair, pose_i, pose_j, geometry, eps):
-            return HEAD_INSERTED
+        if (connection_margin(pair, pose_i, pose_j, footprint) >= -eps
+                and through_opening(pair, pose_i, pose_j, geometry, eps)
+                and lined_up(pair, pose_i, pose_j, seating, pair.point_i)):
+            pair.confirmed += 1
+            if pair.confirmed >= seating.confirm_steps:
+                return HEAD_INSERTED
+            return HEAD_ALIGNED
+        pair.confirmed = 0
         if head_margin(pair, pose_i, pose_j, footprint) < -eps:
+            return DECOUPLED
+        if now is not None and pair.since is not None and now - pair.since > seating.align_timeout:
             return DECOUPLED
         return HEAD_ALIGNED
     return status
@@ -280,6 +323,7 @@ class PairBook:
     geometry: object
     eps: float
     lost_margin: float
+    seating: Seating = Seating()
     coupled: Dict[Tuple[str, str], ConnectionPair] = field(default_factory=dict)
     goals: List[ConnectionPair] = field(default_factory=list)
     active: List[ConnectionPair] = field(default_factory=list)
@@ -354,8 +398,8 @@ class PairBook:
         self.active = keep + select_active(rest, busy)
         return self.active
 
-    def update(self, poses):
-        """Algorithm 2 on the active pairs, then the coupled-pair watchdog.
+    def update(self, poses, now=None):
+        """Algorithm 2 on the active pairs, then the coupled-pair watchdog (``now`` [s]: the time).
 
         Returns (newly coupled pairs, lost pairs).
         """
@@ -364,7 +408,10 @@ class PairBook:
             pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
             if pi is None or pj is None:
                 continue
-            pair.status = update_status(pair, pi, pj, self.geometry, self.eps)
+            status = update_status(pair, pi, pj, self.geometry, self.eps, self.seating, now)
+            if status != pair.status or pair.since is None:
+                pair.since = now
+            pair.status = status
             if pair.status == HEAD_INSERTED:
                 self.active.remove(pair)
                 self.goals.remove(pair)

@@ -60,12 +60,41 @@ class MPCSettings:
     approach_gain_lateral: float = 2.0    # m/m: standoff per metre of lateral offset of the head
     pair_epsilon: float = 0.0015     # m: margin of the pair status tests (Algorithm 2)
     pair_lost_margin: float = 0.005  # m: a coupled pair whose head is this far outside its polygon is lost
-    wiggle_v_bias: float = 0.02      # m/s: forward speed of the anchor robot while it wiggles out
-    wiggle_w_amplitude: float = 1.5  # rad/s: wiggle turn rate amplitude (paper: w_max)
-    wiggle_period: float = 1.0       # s: wiggle period 2 pi / B
+    insert_lateral_tolerance: float = 0.0007  # m: an anchor pair pushed home is coupled only when C_a is this
+                                     # close to the opening's axis ...
+    insert_yaw_tolerance: float = 0.1    # rad: ... and the pair's headings agree this well
+    insert_confirm_steps: int = 3    # consecutive control steps the head_inserted condition must hold
+    insert_timeout: float = 4.0      # s: head_aligned for longer (a jammed anchor): back off, line up again
+    hardware_v_max: float = 0.2      # m/s: the robots' own speed limit (open-loop commands stay within it)
+    hardware_w_max: float = 6.0      # rad/s: the robots' own turn-rate limit
+    wiggle_v_bias: float = 0.03      # m/s: forward speed of the anchor robot while it wiggles out
+    wiggle_w_amplitude: float = 3.0  # rad/s: wiggle turn rate amplitude (paper: w_max), the turn rate limit of
+                                     # the closed-loop swing; sent directly: within the hardware limits, not
+                                     # v_max, w_max
+    wiggle_period: float = 2.0       # s: wiggle period 2 pi / B
+    wiggle_heading_amplitude: float = 0.55  # rad: the wiggle swings the pair's relative heading +-this
+                                     # (closed loop on the poses); 0: the paper's open-loop w_max sin(B t)
+    wiggle_heading_gain: float = 10.0    # 1/s: feedback gain of that relative-heading swing
+    wiggle_cycles: int = 1           # wiggle periods per attempt (then the anchor is pushed back in: retry)
+    wiggle_alternate: bool = True    # flip the wiggle's sign every period: the heading swings to both sides
+                                     # in turn (false: the paper's sin(B t), always to the same side first)
+    decouple_reseat_time: float = 0.5    # s: between attempts the anchor robot backs into its partner for
+                                     # this long (0: one endless wiggle, the paper's controller)
+    decouple_reseat_speed: float = 0.04  # m/s: ... at this speed (open loop; the anchor goes back in)
     hold_scale: float = 100.0        # rest-weight scale of an assembly a single robot docks onto (holds still)
-    follower_rest_scale: float = 0.1  # rest-cost scale (0..1) of robots dragged along by a coupled partner
-    decouple_clearance: float = 0.003  # m: decoupled once the anchor head is this far outside the opening robot
+    decouple_clearance: float = 0.007  # m: decoupled once H_a is this far outside the opening robot (+ eps);
+                                     # a pulled anchor slides out of its holder: its tip is then ~6 mm behind H_a
+    decouple_creep: float = 0.005    # m/s: the opening robot backs into its own assembly while its partner wiggles
+    decouple_settle_speed: float = 0.01  # m/s: after the release both robots push back into their assemblies ...
+    decouple_settle_time: float = 1.5    # s: ... for this long (re-seats the neighbours' anchors the wiggle bent)
+    decouple_confirm_steps: int = 3  # consecutive control steps the release must be seen
+
+    def seating(self):
+        """The pair status tests' lining-up conditions (puzzlebot_mpc.pairs.Seating)."""
+        from puzzlebot_mpc.pairs import Seating
+
+        return Seating(self.insert_lateral_tolerance, self.insert_yaw_tolerance, self.insert_confirm_steps,
+                       self.insert_timeout)
 
     @classmethod
     def from_dict(cls, data, where="mpc"):
@@ -77,12 +106,18 @@ class MPCSettings:
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "pair_epsilon", "pair_lost_margin", "wiggle_period",
+                                "wiggle_cycles",
+                                "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
+                                "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout",
+                                "decouple_confirm_steps",
                                 "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip",
                                 "w_slack_butterfly"], where)
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
-                    "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "follower_rest_scale", "hold_scale", "butterfly_lobe_robots",
+                    "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
+                    "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
+                    "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
@@ -91,6 +126,18 @@ class MPCSettings:
                               % (where, self.constraint_horizon, self.horizon))
         if self.solver not in ("clarabel", "ipopt"):
             raise ConfigError("%s.solver: unknown solver %r; known: clarabel, ipopt" % (where, self.solver))
-        if self.wiggle_v_bias > self.v_max or self.wiggle_w_amplitude > self.w_max:
-            raise ConfigError("%s: the wiggle (%.3f m/s, %.2f rad/s) exceeds the limits v_max, w_max"
-                              % (where, self.wiggle_v_bias, self.wiggle_w_amplitude))
+        if self.decouple_creep > self.v_max or self.decouple_settle_speed > self.v_max:
+            raise ConfigError("%s: decouple_creep and decouple_settle_speed must be <= v_max (%.3f m/s)"
+                              % (where, self.v_max))
+        if self.v_max > self.hardware_v_max or self.w_max > self.hardware_w_max:
+            raise ConfigError("%s: v_max, w_max (%.3f m/s, %.2f rad/s) exceed the hardware limits "
+                              "hardware_v_max, hardware_w_max (%.3f m/s, %.2f rad/s)"
+                              % (where, self.v_max, self.w_max, self.hardware_v_max, self.hardware_w_max))
+        if self.decouple_reseat_speed > self.hardware_v_max:
+            raise ConfigError("%s.decouple_reseat_speed (%.3f m/s) exceeds hardware_v_max (%.3f m/s)"
+                              % (where, self.decouple_reseat_speed, self.hardware_v_max))
+        if self.wiggle_v_bias > self.hardware_v_max or self.wiggle_w_amplitude > self.hardware_w_max:
+            raise ConfigError("%s: the wiggle (%.3f m/s, %.2f rad/s) exceeds the hardware limits "
+                              "hardware_v_max, hardware_w_max (%.3f m/s, %.2f rad/s)"
+                              % (where, self.wiggle_v_bias, self.wiggle_w_amplitude, self.hardware_v_max,
+                                 self.hardware_w_max))
