@@ -89,8 +89,9 @@ def test_four_scattered_robots_couple_into_a_line(demo):
     status, elapsed = demo["couple"]
     assert status.state == SUCCEEDED, status.message
     assert demo["coupled_after_couple"] == [("pz1", "pz2"), ("pz2", "pz3"), ("pz3", "pz4")]
+    eps = MPCSettings().pair_epsilon       # Algorithm 2 declares a pair coupled within eps of its polygon
     for key, m in demo["margins_after_couple"].items():
-        assert m >= 0.0, "%s: anchor head %.1f mm outside the triangle" % (key, -1e3 * m)
+        assert m >= -eps, "%s: anchor head %.1f mm outside the triangle" % (key, -1e3 * m)
     for key, dth in demo["yaw_after_couple"].items():
         assert abs(dth) <= GEO.anchor_yaw_free
     assert elapsed < 60.0

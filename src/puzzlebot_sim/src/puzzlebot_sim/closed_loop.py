@@ -26,7 +26,7 @@ from puzzlebot_mpc.config_files import config_path as mpc_config_path
 from puzzlebot_mpc.config_files import load_target_file
 from puzzlebot_mpc.control_loop import ControlLoop
 from puzzlebot_mpc.settings import MPCSettings
-from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.world import SimWorld
 
 
@@ -53,6 +53,7 @@ class SimConfig:
     robot: RobotParams
     anchor: AnchorParams
     world: WorldParams
+    anchor_rest: AnchorRestParams = AnchorRestParams()
 
 
 def load_sim_config():
@@ -61,9 +62,11 @@ def load_sim_config():
     cfg = SimConfig(SimParams.from_dict(_section(sim_path, "sim"), where="%s: sim" % sim_path),
                     RobotParams.from_dict(_section(robot_path, "robot"), where="%s: robot" % robot_path),
                     AnchorParams.from_dict(_section(robot_path, "anchor"), where="%s: anchor" % robot_path),
-                    WorldParams.from_dict(_section(sim_path, "world"), where="%s: world" % sim_path))
+                    WorldParams.from_dict(_section(sim_path, "world"), where="%s: world" % sim_path),
+                    AnchorRestParams.from_dict(_section(sim_path, "anchor_rest"),
+                                               where="%s: anchor_rest" % sim_path))
     for part, where in ((cfg.sim, sim_path), (cfg.robot, robot_path), (cfg.anchor, robot_path),
-                        (cfg.world, sim_path)):
+                        (cfg.world, sim_path), (cfg.anchor_rest, sim_path)):
         part.check(where=where)
     return cfg
 
@@ -177,15 +180,12 @@ class ClosedLoop:
 
 
 def make_world(cfg, starts, seed, mocap=None, world="flat"):
-    """A SimWorld from a SimConfig (mocap: a world.MocapModel, default the config's)."""
-    from puzzlebot_sim.world import MocapModel
-
+    """A SimWorld from a SimConfig, built as the sim node builds it (mocap: a world.MocapModel, default the config's)."""
     sim = replace(cfg.sim, seed=seed, world=world, gui=False)
-    return SimWorld(cfg.robot, starts, world=sim.world, physics_rate=sim.physics_rate,
-                    anchor_params=cfg.anchor if sim.anchors else None, world_params=cfg.world,
-                    solver_iterations=sim.solver_iterations, erp=sim.erp, seed=seed,
-                    wheel_imbalance=sim.wheel_imbalance,
-                    mocap=mocap if mocap is not None else MocapModel.from_sim(sim))
+    w = SimWorld.from_params(sim, cfg.robot, starts, cfg.anchor, cfg.world, anchor_rest=cfg.anchor_rest)
+    if mocap is not None:
+        w.mocap = mocap
+    return w
 
 
 def yaw_diff(a, b):

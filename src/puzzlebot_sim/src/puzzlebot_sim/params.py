@@ -260,6 +260,7 @@ class SimParams:
     sync_period: float = 0.1         # s
     sync_timeout: float = 10.0       # s, wall
     sync_startup_timeout: float = 60.0  # s, wall
+    sync_cmd_timeout: float = 1.0    # s, wall: then wait for the commands of that control step
     world: str = "flat"
     gui: bool = False
     seed: int = 0
@@ -282,7 +283,7 @@ class SimParams:
 
     def check(self, where="sim"):
         require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "cmd_timeout", "sync_period",
-                                "sync_timeout", "sync_startup_timeout", "solver_iterations", "erp",
+                                "sync_timeout", "sync_startup_timeout", "sync_cmd_timeout", "solver_iterations", "erp",
                                 "tilted_solver_iterations", "tilt_threshold"], where)
         if self.real_time_factor < 0:
             raise ConfigError("%s.real_time_factor: must be >= 0 (0 = as fast as possible)" % where)
