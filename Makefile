@@ -4,7 +4,7 @@ SHELL := /bin/bash
 ENV := scripts/env.sh
 ARGS ?=
 
-.PHONY: all setup build sim test test-unit test-ros bench clean
+.PHONY: all setup build sim test test-unit test-ros bench experiments clean
 
 all: build
 
@@ -31,6 +31,11 @@ test-ros: build
 ## make bench: MPC step time for N in 2..32 x Hm in 3, 5, 10 (Hc = 3); table on screen, JSON in build/bench and docs
 bench: build
 	@$(ENV) rosrun puzzlebot_mpc bench --grid --out build/bench/mpc_bench.json --out docs/mpc_bench.json
+
+## make experiments [ARGS="--trials 20"]: the paper's experiments (coupling vs offset, decoupling, MPC time,
+## force profile, chain down the step); resumable; rewrites the figures and tables of docs/results.md
+experiments: bench
+	@$(ENV) rosrun puzzlebot_sim experiments $(ARGS)
 
 clean:
 	rm -rf build devel install

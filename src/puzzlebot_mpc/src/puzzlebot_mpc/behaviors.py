@@ -98,7 +98,8 @@ def wiggle(settings, t, relative_heading=None):
 
     Attempts follow each other: ``wiggle_cycles`` periods of wiggling (phase
     "wiggle"; the sign flips every period with ``wiggle_alternate``: the
-    heading swings to both sides in turn), then ``decouple_reseat_time`` s
+    heading swings to both sides in turn; with less than one period per
+    attempt, e.g. 0.5: one swing, the sign flips every attempt), then ``decouple_reseat_time`` s
     backing into the partner at ``decouple_reseat_speed`` (phase "reseat": an
     anchor caught half out with both barbs flared goes back in, and the next
     attempt starts afresh). ``decouple_reseat_time`` 0: one endless wiggle.
@@ -121,7 +122,10 @@ def wiggle(settings, t, relative_heading=None):
     tau = t - k * attempt
     if tau >= wiggling:
         return -s.decouple_reseat_speed, 0.0, "reseat"
-    cycle = k * s.wiggle_cycles + int(math.floor(tau / s.wiggle_period))
+    if s.wiggle_cycles < 1.0:       # part of a period per attempt: the side alternates from attempt to attempt
+        cycle = k
+    else:
+        cycle = int(round(k * s.wiggle_cycles)) + int(math.floor(tau / s.wiggle_period))
     sign = -1.0 if s.wiggle_alternate and cycle % 2 else 1.0
     b = 2 * math.pi / s.wiggle_period
     if s.wiggle_heading_amplitude > 0 and relative_heading is not None:

@@ -75,7 +75,8 @@ class MPCSettings:
     wiggle_heading_amplitude: float = 0.55  # rad: the wiggle swings the pair's relative heading +-this
                                      # (closed loop on the poses); 0: the paper's open-loop w_max sin(B t)
     wiggle_heading_gain: float = 10.0    # 1/s: feedback gain of that relative-heading swing
-    wiggle_cycles: int = 1           # wiggle periods per attempt (then the anchor is pushed back in: retry)
+    wiggle_cycles: float = 1.0       # wiggle periods per attempt (then the anchor is pushed back in: retry);
+                                     # 0.5: one swing to one side per attempt, the next to the other side
     wiggle_alternate: bool = True    # flip the wiggle's sign every period: the heading swings to both sides
                                      # in turn (false: the paper's sin(B t), always to the same side first)
     decouple_reseat_time: float = 0.5    # s: between attempts the anchor robot backs into its partner for

@@ -82,8 +82,6 @@ class ExperimentParams:
     mated_heading_noise: float = 0.01  # rad, o's heading at a coupled start: uniform +/-
     decouple_timeout: float = 60.0     # s, simulated
     hold_time: float = 1.0             # s at rest after the behaviour: the result must still hold
-    mocap_position_std: float = 0.0003  # m
-    mocap_yaw_std: float = 0.005       # rad
 
     @classmethod
     def from_dict(cls, data, where="experiments"):
@@ -92,7 +90,7 @@ class ExperimentParams:
     def check(self, where="experiments"):
         require_positive(self, ["separation", "couple_timeout", "decouple_timeout"], where)
         for key in ("position_noise", "heading_noise", "anchor_yaw_noise", "mated_lateral_noise",
-                    "mated_heading_noise", "hold_time", "mocap_position_std", "mocap_yaw_std"):
+                    "mated_heading_noise", "hold_time"):
             if not getattr(self, key) >= 0:
                 raise ConfigError("%s.%s: must be >= 0, got %r" % (where, key, getattr(self, key)))
 
@@ -107,10 +105,30 @@ def load_experiment_params(path=None):
     return p
 
 
+def load_vicon_mocap(path=None):
+    """MocapModel of the lab's Vicon (config/mocap_vicon.yaml, the file sim.launch loads)."""
+    path = path or sim_config_path("mocap_vicon.yaml")
+    data = load_yaml(path)
+    section = data.get("sim") if isinstance(data, dict) else None
+    if not isinstance(section, dict):
+        raise ConfigError("%s: expected a mapping with key 'sim'" % path)
+    unknown = sorted(set(section) - {"mocap_position_std", "mocap_yaw_std"})
+    if unknown:
+        raise ConfigError("%s: unknown key(s) %s" % (path, ", ".join(unknown)))
+    values = {}
+    for key in ("mocap_position_std", "mocap_yaw_std"):
+        v = section.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            raise ConfigError("%s: sim.%s must be a number >= 0, got %r" % (path, key, v))
+        values[key] = float(v)
+    return MocapModel(position_std=values["mocap_position_std"], yaw_std=values["mocap_yaw_std"])
+
+
 # --------------------------------------------------------------- versions
 def config_files():
     """The files whose content defines an experiment's physics and controller settings."""
     return [sim_config_path("robot.yaml"), sim_config_path("sim.yaml"), sim_config_path("experiments.yaml"),
+            sim_config_path("mocap_vicon.yaml"),
             mpc_config_path("mpc.yaml"), mpc_config_path("mpc_sim.yaml"), mpc_config_path("targets.yaml")]
 
 
@@ -173,7 +191,7 @@ class _Context:
             except TypeError as e:
                 raise ConfigError("unknown MPC setting in %s: %s" % (sorted(overrides), e)) from None
             self.settings.check()
-        self.mocap = MocapModel(position_std=self.params.mocap_position_std, yaw_std=self.params.mocap_yaw_std)
+        self.mocap = load_vicon_mocap()
 
 
 def anchor_in_holder(world, name, body_side):

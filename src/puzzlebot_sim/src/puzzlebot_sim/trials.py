@@ -57,7 +57,7 @@ def _mated_pair(rng, robot, lateral=0.0003, yaw=0.01):
     return [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(robot.body_side + MATE_GAP), dy, dyaw)]
 
 
-def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, yaw=0.02, anchor_yaw=0.39,
+def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, yaw=0.02, anchor_yaw=0.3,
                    timeout=5.0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
     """One robot drives at ``speed`` into the other's opening from an aligned start.
 
