@@ -237,5 +237,7 @@ def _holder_yaw(pull, sign):
 def test_anchor_yaws_in_its_holder_and_is_squared_up_when_pushed_in():
     free = [_holder_yaw(True, s) for s in (1, -1)]
     pushed = [_holder_yaw(False, s) for s in (1, -1)]
-    assert 0.33 < free[0] < 0.45 and -0.45 < free[1] < -0.33          # about +/-0.4 rad (docs/sim.md)
+    # about +/-0.25 rad with the 5 mm slot: less than the real holder's +/-0.5 rad, because a wider
+    # slot lets Bullet pull the anchor's ball through it while wiggling (docs/sim.md)
+    assert 0.2 < free[0] < 0.3 and -0.3 < free[1] < -0.2
     assert max(abs(v) for v in pushed) < 0.6 * min(abs(v) for v in free)

@@ -73,7 +73,7 @@ class RobotParams:
     holder_wall: float = 0.002       # m, retaining wall thickness
     holder_width: float = 0.0084     # m, pocket width (y): anchor base's lateral play +/-0.2 mm
     holder_height: float = 0.0082    # m, pocket height (z)
-    holder_slot_width: float = 0.0055  # m, slot in the retaining wall: the anchor's yaw play (+/-0.3 rad)
+    holder_slot_width: float = 0.0050  # m, slot in the retaining wall: the anchor's yaw play
     holder_slot_height: float = 0.0045  # m: the bar rests on the slot's bottom (pitch play)
     # side connectors for rigid (bridge) coupling: knob on the left (+y), hole on the right (-y)
     knob_radius: float = 0.0045      # m
