@@ -132,6 +132,10 @@ def config_files():
             mpc_config_path("mpc.yaml"), mpc_config_path("mpc_sim.yaml"), mpc_config_path("targets.yaml")]
 
 
+#: Modules that only report results (tables, figures, the suite's driver): not part of a trial's version.
+REPORTING_MODULES = ("results_page.py", "experiment_suite.py")
+
+
 def source_files():
     """The Python sources of the packages a trial runs (simulation, controller, common)."""
     import puzzlebot_common
@@ -141,7 +145,8 @@ def source_files():
     out = []
     for pkg in (puzzlebot_common, puzzlebot_mpc, puzzlebot_sim):
         root = os.path.dirname(os.path.abspath(pkg.__file__))
-        out += sorted(os.path.join(root, f) for f in os.listdir(root) if f.endswith(".py"))
+        out += sorted(os.path.join(root, f) for f in os.listdir(root)
+                      if f.endswith(".py") and not (pkg is puzzlebot_sim and f in REPORTING_MODULES))
     return out
 
 

@@ -135,6 +135,16 @@ def _plt():
     return plt
 
 
+def _finish(fig, axes, path, which="major"):
+    """Legend and grid on every axis, then save the figure as PNG and close it."""
+    for ax in axes:
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3, which=which)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+
+
 def couple_figure(records, path):
     plt = _plt()
     groups = by_offset(records)
@@ -143,16 +153,14 @@ def couple_figure(records, path):
     rate = [100 * s["success_rate"] for s in stats]
     lo_hi = [wilson_interval(s["successes"], s["trials"]) for s in stats]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
-    a1.errorbar(offs, rate, yerr=[[r - 100 * l for r, (l, _) in zip(rate, lo_hi)],
-                                  [100 * h - r for r, (_, h) in zip(rate, lo_hi)]],
+    a1.errorbar(offs, rate, yerr=[[max(0.0, r - 100 * l) for r, (l, _) in zip(rate, lo_hi)],
+                                  [max(0.0, 100 * h - r) for r, (_, h) in zip(rate, lo_hi)]],
                 fmt="o-", capsize=3, label="this stack (Bullet, MPC)")
     a1.axhline(100 * PAPER_COUPLE_BEST, color="C3", ls="--", label="paper: best (97.5 %, 0 mm)")
     a1.axhline(100 * GOAL_COUPLE_RATE, color="C2", ls=":", label="goal: 99 %")
     a1.set_xlabel("lateral offset [mm]")
     a1.set_ylabel("coupled within 60 s [%]")
     a1.set_ylim(min(80, min(rate) - 5), 101)
-    a1.legend(loc="lower right", fontsize=8)
-    a1.grid(alpha=0.3)
     times = [[r["time_s"] for r in groups[o] if r["success"] and r.get("time_s") is not None] for o in offs]
     a2.boxplot([t if t else [float("nan")] for t in times], positions=offs, widths=1.2, showfliers=True)
     a2.plot(offs, [np.mean(t) if t else np.nan for t in times], "o-", color="C1", label="mean")
@@ -160,11 +168,7 @@ def couple_figure(records, path):
     a2.set_ylabel("coupling time [s]")
     a2.set_xticks(offs)
     a2.set_xticklabels(["%g" % o for o in offs], fontsize=7)
-    a2.legend(fontsize=8)
-    a2.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, (a1, a2), path)
 
 
 def decouple_figure(records, path):
@@ -178,11 +182,7 @@ def decouple_figure(records, path):
     ax.axvline(GOAL_DECOUPLE_MEAN_S, color="C2", ls=":", label="goal: mean <= 4 s")
     ax.set_xlabel("decoupling time [s]")
     ax.set_ylabel("trials")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, (ax,), path)
 
 
 def bench_figure(bench, path):
@@ -197,11 +197,7 @@ def bench_figure(bench, path):
     ax.set_xlabel("robots")
     ax.set_ylabel("MPC step [ms] (band: median-p95)")
     ax.set_yscale("log")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, (ax,), path, which="both")
 
 
 def force_figure(d, fwd, back, path):
@@ -213,11 +209,7 @@ def force_figure(d, fwd, back, path):
     ax.axhline(0.2, color="C0", ls=":", label="paper: forward peak < 0.2 N")
     ax.set_xlabel("probe displacement [mm]")
     ax.set_ylabel("force [N]")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, (ax,), path)
 
 
 # -------------------------------------------------------------------- page
