@@ -67,6 +67,12 @@ def test_sweep_is_resumable_and_keeps_torn_lines(tmp_path, ctx):
     assert all(r["config"] == version for r in lines)
 
 
+def test_the_version_covers_the_sources_a_trial_runs():
+    names = {os.path.basename(f) for f in ex.source_files()}
+    assert {"world.py", "experiments.py", "controller.py", "behaviors.py", "pairs.py", "config.py"} <= names
+    assert not names & set(ex.REPORTING_MODULES)
+
+
 def test_summary_counts_only_physical_successes():
     recs = [{"success": True, "time_s": 4.0, "controller": "succeeded"},
             {"success": True, "time_s": 6.0, "controller": "succeeded"},

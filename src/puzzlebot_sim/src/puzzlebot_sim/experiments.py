@@ -138,15 +138,17 @@ REPORTING_MODULES = ("results_page.py", "experiment_suite.py")
 
 def source_files():
     """The Python sources of the packages a trial runs (simulation, controller, common)."""
-    import puzzlebot_common
-    import puzzlebot_mpc
-    import puzzlebot_sim
+    # A module of each package, not the package: in a catkin devel space the package's __init__
+    # is a generated stub in devel/, the modules are in src/.
+    from puzzlebot_common import config as common_module
+    from puzzlebot_mpc import controller as mpc_module
+    from puzzlebot_sim import world as sim_module
 
     out = []
-    for pkg in (puzzlebot_common, puzzlebot_mpc, puzzlebot_sim):
-        root = os.path.dirname(os.path.abspath(pkg.__file__))
+    for module in (common_module, mpc_module, sim_module):
+        root = os.path.dirname(os.path.abspath(module.__file__))
         out += sorted(os.path.join(root, f) for f in os.listdir(root)
-                      if f.endswith(".py") and not (pkg is puzzlebot_sim and f in REPORTING_MODULES))
+                      if f.endswith(".py") and not (module is sim_module and f in REPORTING_MODULES))
     return out
 
 
