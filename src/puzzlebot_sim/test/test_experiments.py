@@ -57,12 +57,14 @@ def test_sweep_is_resumable_and_keeps_torn_lines(tmp_path, ctx):
     path = str(tmp_path / "results.jsonl")
     tasks = ex.tasks_for(ex.COUPLE, 2, SEED, (4.0,))
     ex.run_sweep(tasks[:1], path, jobs=1, stream=open(os.devnull, "w"))
+    with open(path, "a") as f:          # another experiment's record (the chain trials share the file)
+        f.write('{"experiment": "chain", "seed": 1, "success": false}\n')
     with open(path, "a") as f:          # a run killed while writing leaves half a line
         f.write('{"experiment": "couple", "offs')
     recs = ex.run_sweep(tasks, path, jobs=1, stream=open(os.devnull, "w"))
     assert [r["trial"] for r in recs] == [0, 1]
     lines = [json.loads(s) for s in open(path) if s.strip().startswith("{") and s.strip().endswith("}")]
-    assert len(lines) == 2               # trial 0 was not run again
+    assert len(lines) == 3               # trial 0 was not run again (and the chain record kept)
     version = ex.config_hash()
     assert all(r["config"] == version for r in lines)
 

@@ -488,7 +488,7 @@ def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=Non
     _Context(overrides=overrides)          # bad overrides fail here, before any worker starts
     version = config_hash(overrides)
     results = ResultsFile(results_path)
-    have = {record_key(r): r for r in results.load()}
+    have = {record_key(r): r for r in results.load() if r.get("experiment") in EXPERIMENT_CODES}
     todo = [t for t in tasks if t.key(version) not in have]
     progress = Progress(label, len(tasks), len(tasks) - len(todo), stream)
     progress.ok = sum(bool(have[t.key(version)]["success"]) for t in tasks if t.key(version) in have)
