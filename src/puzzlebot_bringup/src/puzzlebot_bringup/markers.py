@@ -37,6 +37,7 @@ from puzzlebot_common import names
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import compose, inverse_transform_point, transform_point
 from puzzlebot_common.params import from_mapping
+from puzzlebot_mpc.pairs import components
 from puzzlebot_msgs.msg import ConnectionPair
 
 Colour = Tuple[float, float, float, float]
@@ -149,22 +150,9 @@ def _polygon(pair, geometry):
 
 def assemblies(robot_names, pairs):
     """Groups of robots joined by coupled (head_inserted) pairs, largest first (ties: list order)."""
-    parent = {n: n for n in robot_names}
-
-    def root(n):
-        while parent[n] != n:
-            parent[n] = parent[parent[n]]
-            n = parent[n]
-        return n
-
-    for p in pairs:
-        if p.status == ConnectionPair.STATUS_HEAD_INSERTED and p.robot_i in parent and p.robot_j in parent:
-            parent[root(p.robot_i)] = root(p.robot_j)
-    groups = {}
-    for n in robot_names:
-        groups.setdefault(root(n), []).append(n)
+    coupled = [p for p in pairs if p.status == ConnectionPair.STATUS_HEAD_INSERTED]
     order = {n: k for k, n in enumerate(robot_names)}
-    return sorted(groups.values(), key=lambda g: (-len(g), min(order[n] for n in g)))
+    return sorted(components(robot_names, coupled), key=lambda g: (-len(g), min(order[n] for n in g)))
 
 
 def placed_slots(slot_robots, slots, poses, pairs):

@@ -232,6 +232,18 @@ def _rest(cl, seconds, on_tick=None):
             on_tick(tick)
 
 
+class FirstTime:
+    """``on_tick`` watcher: the first time [s after ``t0``] the a-o pair's physical status is ``status``."""
+
+    def __init__(self, cl, status):
+        self.cl, self.status, self.t0, self.t = cl, status, cl.time, None
+
+    def __call__(self, tick):
+        if self.t is None and _pair_status(self.cl.physical(), "a", "o") == self.status:
+            self.t = self.cl.time - self.t0
+        return False
+
+
 def _record(experiment, offset_mm, seed, trial, **fields):
     rec = {"experiment": experiment, "offset_mm": offset_mm, "seed": seed, "trial": trial}
     rec.update(fields)
@@ -265,18 +277,11 @@ def couple_trial(offset_mm, seed, trial, ctx=None):
         world.reset_anchor("a", anchor_yaw)
         world.run(SETTLE_S)
         cl = ClosedLoop(world, ctx.settings)
-        seated = {"t": None}
-        t_req = world.time
-
-        def watch(tick):
-            if seated["t"] is None and _pair_status(cl.physical(), "a", "o") == HEAD_INSERTED:
-                seated["t"] = world.time - t_req
-            return False
-
+        seated = FirstTime(cl, HEAD_INSERTED)
         state, message, elapsed = cl.run_behavior(
             BehaviorRequest(COUPLE, ["a", "o"], target="line", timeout=p.couple_timeout),
-            p.couple_timeout + 1.0, on_tick=watch)
-        _rest(cl, p.hold_time, watch)      # the barbs spring into the slits when the push ends
+            p.couple_timeout + 1.0, on_tick=seated)
+        _rest(cl, p.hold_time, seated)     # the barbs spring into the slits when the push ends
         final = cl.physical()
         final_status = _pair_status(final, "a", "o")
         geo = cl.geometry
@@ -286,11 +291,11 @@ def couple_trial(offset_mm, seed, trial, ctx=None):
         lateral = pr.point_in_robot(po, pr.world_point(pa, pair.point_i))[1]
         dyaw = pr.alignment_error(pair, pa, po)[1]
         held, ax, ayaw = anchor_in_holder(world, "a", L)
-        ok = (seated["t"] is not None and seated["t"] <= p.couple_timeout and final_status == HEAD_INSERTED
+        ok = (seated.t is not None and seated.t <= p.couple_timeout and final_status == HEAD_INSERTED
               and held)
         return _record(COUPLE, offset_mm, seed, trial, success=bool(ok), anchor_in_holder=held,
                        anchor_x_mm=round(1e3 * ax, 1),
-                       time_s=round(seated["t"], 2) if seated["t"] is not None else None,
+                       time_s=round(seated.t, 2) if seated.t is not None else None,
                        controller=STATE_NAMES[state], controller_time_s=round(elapsed, 2),
                        controller_message=message, final_status=int(final_status),
                        pairs=sorted("%s>%s" % k for k, v in final.items() if v == HEAD_INSERTED),
@@ -325,25 +330,18 @@ def decouple_trial(seed, trial, ctx=None):
         if state != SUCCEEDED:
             return _record(DECOUPLE, 0.0, seed, trial, success=False, time_s=None,
                            controller="couple " + STATE_NAMES[state], controller_message=message, **fields)
-        released = {"t": None}
-        t_req = world.time
-
-        def watch(tick):
-            if released["t"] is None and _pair_status(cl.physical(), "a", "o") == DECOUPLED:
-                released["t"] = world.time - t_req
-            return False
-
+        released = FirstTime(cl, DECOUPLED)
         state, message, elapsed = cl.run_behavior(
             BehaviorRequest(DECOUPLE, pair=["a", "o"], timeout=p.decouple_timeout),
-            p.decouple_timeout + 1.0, on_tick=watch)
-        _rest(cl, p.hold_time, watch)
+            p.decouple_timeout + 1.0, on_tick=released)
+        _rest(cl, p.hold_time, released)
         final_status = _pair_status(cl.physical(), "a", "o")
         held, ax, ayaw = anchor_in_holder(world, "a", L)
-        ok = (released["t"] is not None and released["t"] <= p.decouple_timeout and state == SUCCEEDED
+        ok = (released.t is not None and released.t <= p.decouple_timeout and state == SUCCEEDED
               and final_status == DECOUPLED and held)
         return _record(DECOUPLE, 0.0, seed, trial, success=bool(ok), anchor_in_holder=held,
                        anchor_x_mm=round(1e3 * ax, 1), anchor_yaw_end=round(ayaw, 3),
-                       time_s=round(released["t"], 2) if released["t"] is not None else None,
+                       time_s=round(released.t, 2) if released.t is not None else None,
                        controller=STATE_NAMES[state], controller_time_s=round(elapsed, 2),
                        controller_message=message, final_status=int(final_status), steps=cl.steps,
                        failed_steps=cl.failed_steps, wall_s=round(time.perf_counter() - wall0, 2), **fields)

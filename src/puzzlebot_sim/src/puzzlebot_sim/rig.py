@@ -21,13 +21,13 @@ dimensions).
 
 import csv
 import os
-import tempfile
 from dataclasses import dataclass
 from typing import List
 
 import numpy as np
 import pybullet as pb
 
+from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
 from puzzlebot_sim.params import AnchorParams, RobotParams
 from puzzlebot_sim.urdf import URDF_FLAGS, anchor_urdf
@@ -52,7 +52,7 @@ class ForceProfile:
                 "backward_peak_mm": self.displacement_mm[int(np.argmax(self.backward_n))]}
 
 
-class ForceRig:
+class ForceRig(BulletSession):
     """The rig in its own physics client (DIRECT)."""
 
     def __init__(self, robot_params=RobotParams(), anchor_params=AnchorParams(), physics_rate=200,
@@ -60,12 +60,11 @@ class ForceRig:
         self.rp, self.ap = robot_params, anchor_params
         self.dt = 1.0 / physics_rate
         self.settle_steps = max(1, int(round(settle_s * physics_rate)))
-        self.client = c = pb.connect(pb.DIRECT)
+        c = self._connect(False, "puzzlebot_rig_")
         pb.setGravity(0, 0, -9.81, physicsClientId=c)
         pb.setTimeStep(self.dt, physicsClientId=c)
         pb.setPhysicsEngineParameter(numSolverIterations=solver_iterations, erp=erp, contactERP=erp,
                                      frictionERP=erp, deterministicOverlappingPairs=1, physicsClientId=c)
-        self._tmp = tempfile.TemporaryDirectory(prefix="puzzlebot_rig_")
         path = os.path.join(self._tmp.name, "anchor.urdf")
         with open(path, "w") as f:
             f.write(anchor_urdf(anchor_params))
@@ -157,17 +156,6 @@ class ForceRig:
         mm = [round(k * step_mm, 6) for k in range(n + 1)]
         return ForceProfile(mm, self.push("forward", max_mm, step_mm), self.push("backward", max_mm, step_mm))
 
-    def close(self):
-        if self.client is not None and pb.isConnected(physicsClientId=self.client):
-            pb.disconnect(physicsClientId=self.client)
-        self.client = None
-        self._tmp.cleanup()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def write_csv(profile, path):

@@ -22,7 +22,6 @@ centre of its base block, axes parallel to the robot's at rest.
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +31,7 @@ from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
 from puzzlebot_common.kinematics import wheel_speeds
 from puzzlebot_sim import coupling
+from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, WorldParams
 from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
@@ -157,7 +157,7 @@ def _obb_overlap(a, b, grow):
 
 
 # -------------------------------------------------------------------- world
-class SimWorld:
+class SimWorld(BulletSession):
     """PuzzleBots (and their anchors) in a Bullet world. Commands are body velocities (v, w).
 
     Arguments: ``robot_params`` (RobotParams), ``starts`` (RobotStart list),
@@ -209,8 +209,7 @@ class SimWorld:
         self.seed = seed
         self.mocap = mocap
         self.wheel_imbalance = wheel_imbalance
-        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
-        c = self.client
+        c = self._connect(gui, "puzzlebot_urdf_")
         pb.resetSimulation(physicsClientId=c)
         pb.setGravity(0, 0, -GRAVITY, physicsClientId=c)
         pb.setTimeStep(self.dt, physicsClientId=c)
@@ -236,7 +235,6 @@ class SimWorld:
             self._zone_radius = max(math.hypot(robot_params.body_side / 2, robot_params.body_side / 2),
                                     abs(box[0] + box[1]) / 2.0 + math.hypot(*half))
             self._box_radius = math.hypot(*half)
-        self._tmp = tempfile.TemporaryDirectory(prefix="puzzlebot_urdf_")
         self.terrain = WORLDS[world](c, self.world_params)
         self.static_bodies = self.terrain.bodies
         for body in self.static_bodies:
@@ -722,15 +720,4 @@ class SimWorld:
                    mocap=MocapModel.from_sim(sim), anchor_rest=anchor_rest,
                    tilted_solver_iterations=sim.tilted_solver_iterations, tilt_threshold=sim.tilt_threshold)
 
-    def close(self):
-        if self.client is not None and pb.isConnected(physicsClientId=self.client):
-            pb.disconnect(physicsClientId=self.client)
-        self.client = None
-        self._tmp.cleanup()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
