@@ -76,3 +76,25 @@ def test_unrequested_robots_are_stopped():
     assert (o.velocity_mask > 0).all()
     assert o.velocity[1] == pytest.approx([0.03, 0.2])
     assert o.velocity[0] == pytest.approx([0, 0]) and o.velocity[2] == pytest.approx([0, 0])
+
+
+def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home():
+    settings = MPCSettings()
+    m = BehaviorManager(["pz1", "pz2"], settings)
+
+    def step(now, poses):              # as control_loop.ControlLoop.step does
+        m.pairs.update(poses, now)
+        m.update(now, poses)
+        m.pairs.assign_active(poses)
+        return m.objectives(now, poses).velocity_mask
+
+    far = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.15, 0.0, 0.0)}
+    m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=far)
+    assert (step(0.1, far) == 0.0).all()                               # lining up: both move
+    (pair,) = m.pairs.active
+    a, o = pair.robot_i, pair.robot_j                                  # o docks (the opening robot)
+    inside = {a: (0.0, 0.0, 0.0), o: (-m.geometry.body_side - 0.008, 0.0, 0.0)}   # head 8 mm in
+    mask = step(0.2, inside)
+    assert pair.status == 1                                            # head_aligned
+    assert mask[m.index[a]] == pytest.approx([math.sqrt(settings.hold_scale)] * 2)   # a holds still
+    assert mask[m.index[o]] == pytest.approx([0.0, 0.0])                              # o pushes

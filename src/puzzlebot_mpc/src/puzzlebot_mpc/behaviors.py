@@ -426,14 +426,20 @@ class BehaviorManager:
         """The single robot of an active pair docks (no rest cost); the assembly it joins holds still
         (rest cost scaled by hold_scale), so the docking robot aligns with a target that does not move.
 
-        The seed pair (two single robots) aligns with both robots moving.
+        The seed pair (two single robots) lines up with both robots moving;
+        once its anchor head is in the opening (head_aligned) the robot that
+        is not the mover holds still while the mover pushes the anchor home
+        (otherwise the partner gives way and the pair drives off together,
+        into the robots around it).
         """
         hold = math.sqrt(self.settings.hold_scale)
         for p in self.pairs.active:
             sizes = [len(pr.assembly_of(r, self.names, self.pairs.coupled.values())) for r in p.robots]
+            seed_pushing = sizes == [1, 1] and p.status == pr.HEAD_ALIGNED
+            holder = p.robot_j if self._mover(p) == "i" else p.robot_i
             for r, size in zip(p.robots, sizes):
                 if size == 1:
-                    obj.velocity_mask[self.index[r]] = 0.0
+                    obj.velocity_mask[self.index[r]] = hold if seed_pushing and r == holder else 0.0
                 else:
                     for m in pr.assembly_of(r, self.names, self.pairs.coupled.values()):
                         obj.velocity_mask[self.index[m]] = hold
