@@ -52,3 +52,15 @@ def test_speed_test_and_scripts_report_json(tmp_path):
     bad = subprocess.run([sys.executable, os.path.join(SCRIPTS, "force_profile"), "--out", str(tmp_path),
                           "--robot", str(tmp_path / "missing.yaml")], capture_output=True, text=True)
     assert bad.returncode == 2 and "no such file" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_chain_trial_reports_how_a_pair_came_apart():
+    # the chain down the step (docs/sim.md: 1/10, not achieved): whatever the outcome, a separation is
+    # reported with the pair and the anchor's state, and the anchor never leaves its holder (base travel
+    # at most the holder's stop plus contact compliance)
+    r = T.chain_step_trial(3)
+    sep = r["first_separation"]
+    assert (sep is None) == (r["pairs_ever_decoupled"] == 0), r
+    if sep is not None:
+        assert sep["pair"] in ("r1>r2", "r2>r3") and set(sep["pitch_rad"]) == {"r1", "r2", "r3"}, sep
+        assert 0.0 <= sep["max_pullout_mm"] < 8.0, sep

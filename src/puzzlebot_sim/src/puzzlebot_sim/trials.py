@@ -209,6 +209,13 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
 
     Success: within ``timeout`` every robot stands upright on the floor and no
     pair was ever decoupled. Seeded perturbation: small lateral offsets.
+
+    Also reports ``first_separation`` (None if no pair came apart): the pair
+    (``"r2>r3"``: r2's anchor in r3's opening), when, every robot's pitch
+    then, and that pair's largest barb angle and anchor pull-out in its holder
+    (base travel out of the pushed-in position, mm) up to the separation:
+    barbs beyond the snap angle mean the anchor was pulled out through the
+    force profile; a large pull-out with barbs below it means it slipped.
     """
     rng = np.random.default_rng(seed)
     names = ["r%d" % (i + 1) for i in range(n)]
@@ -226,7 +233,8 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
     v = -speed if backward else speed
     with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
         w.run(0.2)
-        t0, decoupled, slow = w.time, set(), False
+        t0, decoupled, slow, first = w.time, set(), False, None
+        barb, pulled = [0.0] * (n - 1), [0.0] * (n - 1)
         for nm in names:
             w.set_command(nm, v, 0.0)
         while w.time - t0 < timeout:
@@ -235,14 +243,31 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
                 for nm in names[1:]:
                     w.set_command(nm, -floor_speed, 0.0)
             w.run(CONTROL_DT)
-            decoupled |= {i for i in range(n - 1) if _status(w, names[i], names[i + 1]) == DECOUPLED}
+            for i in range(n - 1):
+                barb[i] = max(barb[i], *w.anchor_joints(names[i])[1:])
+                pulled[i] = max(pulled[i], w._anchor_home_x - _anchor_x_in_holder(w, names[i]))
+            now = {i for i in range(n - 1) if _status(w, names[i], names[i + 1]) == DECOUPLED}
+            if now and first is None:
+                i = min(now)
+                first = {"pair": "%s>%s" % (names[i], names[i + 1]), "time_s": round(w.time - t0, 2),
+                         "pitch_rad": {nm: round(_pitch(w, nm), 2) for nm in names},
+                         "max_barb_rad": round(barb[i], 2), "snap_rad": round(w._torque_map.snap_angle
+                                                                             - anchor.barb_angle, 2),
+                         "max_pullout_mm": round(1e3 * pulled[i], 1)}
+            decoupled |= now
             if all(_upright_on_floor(w, nm, robot) for nm in names):
                 break
         down = [_upright_on_floor(w, nm, robot) for nm in names]
         return {"trial": "chain_step", "seed": seed, "robots": n, "direction": direction, "pilot": pilot,
                 "success": bool(all(down) and not decoupled), "upright_on_floor": sum(down),
                 "pairs_ever_decoupled": len(decoupled),
-                "time_s": round(w.time - t0, 2) if all(down) else None}
+                "time_s": round(w.time - t0, 2) if all(down) else None, "first_separation": first}
+
+
+def _anchor_x_in_holder(w, name):
+    """x of ``name``'s anchor base in the robot's frame [m] (3-D: valid while the robot is tilted)."""
+    inv = pb.invertTransform(*w.pose(name))
+    return pb.multiplyTransforms(*inv, w.anchor_pose(name)[0], [0, 0, 0, 1])[0][0]
 
 
 def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams(),
