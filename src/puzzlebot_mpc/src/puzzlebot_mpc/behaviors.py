@@ -21,8 +21,9 @@ Behaviours:
   the other side first (:func:`wiggle`); the MPC drives the robots coupled
   to a straight on at a's speed (so they neither pull on a's front nor turn
   with it), the opening robot o creeps back into its own assembly
-  at ``decouple_creep`` (o alone holds still) and the rest of o's assembly
-  holds. Released when, from the measured poses, a's anchor point C_a is
+  at ``decouple_creep`` and the rest of o's assembly holds; an o that is not
+  coupled to other robots turns in place against a's swing instead
+  (:func:`partner_turn`, ``wiggle_partner_turn``). Released when, from the measured poses, a's anchor point C_a is
   farther than anchor_length + ``decouple_clearance`` + eps from o's opening
   point C_o on ``decouple_confirm_steps`` steps in a row: an anchor that
   slides out of its holder and turns in it cannot reach into the opening
