@@ -1,11 +1,14 @@
 import math
+from dataclasses import replace
 
 import pytest
 
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors import (FAILED, RUNNING, SUCCEEDED, BehaviorError, BehaviorManager,
-                                     BehaviorRequest)
+                                     BehaviorRequest, partner_turn, wiggle)
 from puzzlebot_mpc.settings import MPCSettings
 
 import os
@@ -98,3 +101,68 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home():
     assert pair.status == 1                                            # head_aligned
     assert mask[m.index[a]] == pytest.approx([math.sqrt(settings.hold_scale)] * 2)   # a holds still
     assert mask[m.index[o]] == pytest.approx([0.0, 0.0])                              # o pushes
+
+
+# ------------------------------------------------- decouple: the partner turns the other way
+
+SHARE = 0.3
+
+
+def wiggling_settings(share=SHARE):
+    return replace(MPCSettings(), wiggle_partner_turn=share, wiggle_cycles=0.5, wiggle_period=2.0,
+                   decouple_reseat_time=0.5, wiggle_heading_amplitude=0.55)
+
+
+@pytest.mark.parametrize("data, fragment", [
+    ({"wiggle_partner_turn": 1.5}, "wiggle_partner_turn"),
+    ({"wiggle_partner_turn": -0.1}, "wiggle_partner_turn"),
+])
+def test_partner_turn_outside_0_1_is_refused(data, fragment):
+    with pytest.raises(ConfigError, match=fragment):
+        MPCSettings.from_dict(data)
+
+
+def test_partner_turns_against_the_swing_only_while_it_is_alone_and_a_swing_runs():
+    s = wiggling_settings()
+    assert partner_turn(s, 2.0, "wiggle", 1) == pytest.approx(-SHARE * 2.0)
+    assert partner_turn(s, -1.0, "wiggle", 1) == pytest.approx(SHARE)
+    assert partner_turn(s, 2.0, "reseat", 1) is None           # between swings the MPC drives it
+    assert partner_turn(s, 2.0, "wiggle", 2) is None           # in an assembly it does not turn in place
+    assert partner_turn(wiggling_settings(0.0), 2.0, "wiggle", 1) is None
+
+
+def decoupling(names, coupled):
+    """A manager running ``decouple`` of the first coupled pair; robots in a line along -x, facing +x."""
+    geo = RobotGeometry()
+    m = BehaviorManager(list(names), wiggling_settings(), geo)
+    for a, o in coupled:
+        m.pairs.add_coupled(pr.make_pair(a, o, pr.ANCHOR, geo, status=pr.HEAD_INSERTED))
+    poses = {n: (-0.0503 * k, 0.0, 0.0) for k, n in enumerate(names)}
+    m.request(BehaviorRequest("decouple", pair=list(coupled[0])), now=0.0, poses=poses)
+    return m, poses
+
+
+def test_a_lone_partner_counter_turns_through_each_swing_and_not_while_reseating():
+    m, poses = decoupling(["pz1", "pz2"], [("pz1", "pz2")])
+    s = m.settings
+    seen = []
+    for k in range(15):                                      # one attempt: a 1 s swing, then 0.5 s reseat
+        t = 0.1 * k
+        rel = s.wiggle_heading_amplitude * math.sin(math.pi * t) if t < 1.0 else 0.0
+        poses["pz1"] = (0.0, 0.0, rel)                       # scripted: the swing follows its reference
+        obj = m.objectives(now=t, poses=poses)
+        v, w, phase = wiggle(s, t, rel)
+        assert obj.open_loop[0] == pytest.approx((v, w))     # the anchor robot wiggles
+        if phase == "wiggle":
+            assert obj.open_loop[1] == pytest.approx((0.0, -SHARE * w))
+            seen.append(math.copysign(1.0, w) if abs(w) > 1e-6 else 0.0)
+        else:
+            assert 1 not in obj.open_loop                    # reseat: the MPC drives the partner again
+    assert 1.0 in seen and -1.0 in seen                      # both ways, always against the anchor robot
+
+
+def test_a_partner_with_an_assembly_behind_it_is_not_turned_in_place():
+    m, poses = decoupling(["pz1", "pz2", "pz3"], [("pz1", "pz2"), ("pz2", "pz3")])
+    for k in range(10):
+        obj = m.objectives(now=0.1 * k, poses=poses)
+        assert 0 in obj.open_loop and 1 not in obj.open_loop

@@ -38,11 +38,16 @@ def test_couple_trials_seat_the_anchor_physically(ctx, offset_mm):
 
 
 def test_decouple_trials_release_the_anchor_by_wiggling(ctx):
-    for trial in range(3):
+    times = []
+    for trial in range(10):
         rec = ex.decouple_trial(DECOUPLE_SEED, trial, ctx)
         assert rec["success"], rec
         assert rec["final_status"] == ex.DECOUPLED and rec["anchor_in_holder"]
         assert rec["controller"] == "succeeded"     # the controller saw the release from the poses
+        times.append(rec["time_s"])
+    # the goal of docs/results.md, simulated time; these 10 trials: 1.3 s mean with the partner's
+    # counter-turn (wiggle_partner_turn 0.3), 6.9 s without it
+    assert sum(times) / len(times) <= 4.0, times
 
 
 def test_a_trial_is_the_same_trial_in_any_order(ctx):

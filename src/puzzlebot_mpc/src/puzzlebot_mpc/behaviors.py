@@ -21,8 +21,9 @@ Behaviours:
   the other side first (:func:`wiggle`); the MPC drives the robots coupled
   to a straight on at a's speed (so they neither pull on a's front nor turn
   with it), the opening robot o creeps back into its own assembly
-  at ``decouple_creep`` (o alone holds still) and the rest of o's assembly
-  holds. Released when, from the measured poses, a's anchor point C_a is
+  at ``decouple_creep`` and the rest of o's assembly holds; an o that is not
+  coupled to other robots turns in place against a's swing instead
+  (:func:`partner_turn`, ``wiggle_partner_turn``). Released when, from the measured poses, a's anchor point C_a is
   farther than anchor_length + ``decouple_clearance`` + eps from o's opening
   point C_o on ``decouple_confirm_steps`` steps in a row: an anchor that
   slides out of its holder and turns in it cannot reach into the opening
@@ -133,6 +134,24 @@ def wiggle(settings, t, relative_heading=None):
         w = a * b * math.cos(b * tau) + s.wiggle_heading_gain * (a * math.sin(b * tau) - relative_heading)
         return s.wiggle_v_bias, max(-s.wiggle_w_amplitude, min(s.wiggle_w_amplitude, w)), "wiggle"
     return s.wiggle_v_bias, sign * s.wiggle_w_amplitude * math.sin(b * tau), "wiggle"
+
+
+def partner_turn(settings, w, phase, partner_assembly_size):
+    """The partner's (opening robot's) turn rate [rad/s] while the anchor robot wiggles at ``w``, or None.
+
+    During a swing (phase "wiggle") a partner that is not coupled to other
+    robots turns the other way at ``wiggle_partner_turn`` times the anchor
+    robot's rate, in place: the pair's relative heading then swings on the
+    torque of both robots' wheels, not on the anchor robot's alone, and the
+    barb caught behind its lip is loaded past its snap-through instead of
+    dragging the partner round (docs/mpc.md, "decouple"). None (the MPC
+    drives the partner as before) between swings, with the setting at 0 and
+    for a partner in an assembly: turning it in place would twist its other
+    couplings.
+    """
+    if phase != "wiggle" or settings.wiggle_partner_turn <= 0 or partner_assembly_size > 1:
+        return None
+    return -settings.wiggle_partner_turn * w
 
 
 def _finite(values):
@@ -464,6 +483,9 @@ class BehaviorManager:
                     obj.velocity[self.index[m]] = (v, 0.0)
                     obj.velocity_mask[self.index[m]] = 1.0
             obj.velocity[o] = (-s.decouple_creep if o_push else 0.0, 0.0)
+            w_o = partner_turn(s, w, phase, len(self._o_side))
+            if w_o is not None:
+                obj.open_loop[o] = (0.0, w_o)
         else:
             obj.velocity[a] = (a_push, 0.0)
             obj.velocity[o] = (-o_push, 0.0)
@@ -492,9 +514,13 @@ class BehaviorManager:
         d = self._decoupling
         i = self.index[d.robot_i]
         t = (now if now is not None else self._start) - self._start
+        j = self.index[d.robot_j]
         for k in range(h):
-            v, w, _ = wiggle(s, t + s.dt * (k + 1))
+            v, w, phase = wiggle(s, t + s.dt * (k + 1))
             vel[i, k] = (float(np.clip(v, -s.v_max, s.v_max)), float(np.clip(w, -s.w_max, s.w_max)))
+            w_o = partner_turn(s, w, phase, len(self._o_side))
+            if w_o is not None:
+                vel[j, k] = (0.0, float(np.clip(w_o, -s.w_max, s.w_max)))
         return vel
 
     def _assembly_velocities(self, poses):

@@ -79,6 +79,8 @@ class MPCSettings:
                                      # 0.5: one swing to one side per attempt, the next to the other side
     wiggle_alternate: bool = True    # flip the wiggle's sign every period: the heading swings to both sides
                                      # in turn (false: the paper's sin(B t), always to the same side first)
+    wiggle_partner_turn: float = 0.0     # the partner (opening robot, when alone) turns the other way at this
+                                     # fraction of the anchor robot's wiggle turn rate (0: it holds still)
     decouple_reseat_time: float = 0.5    # s: between attempts the anchor robot backs into its partner for
                                      # this long (0: one endless wiggle, the paper's controller)
     decouple_reseat_speed: float = 0.04  # m/s: ... at this speed (open loop; the anchor goes back in)
@@ -118,7 +120,7 @@ class MPCSettings:
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
                     "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
-                    "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "hold_scale", "butterfly_lobe_robots",
+                    "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
@@ -134,6 +136,9 @@ class MPCSettings:
             raise ConfigError("%s: v_max, w_max (%.3f m/s, %.2f rad/s) exceed the hardware limits "
                               "hardware_v_max, hardware_w_max (%.3f m/s, %.2f rad/s)"
                               % (where, self.v_max, self.w_max, self.hardware_v_max, self.hardware_w_max))
+        if self.wiggle_partner_turn > 1.0:
+            raise ConfigError("%s.wiggle_partner_turn (%g) must be within [0, 1]: a fraction of the anchor "
+                              "robot's wiggle turn rate" % (where, self.wiggle_partner_turn))
         if self.decouple_reseat_speed > self.hardware_v_max:
             raise ConfigError("%s.decouple_reseat_speed (%.3f m/s) exceeds hardware_v_max (%.3f m/s)"
                               % (where, self.decouple_reseat_speed, self.hardware_v_max))
