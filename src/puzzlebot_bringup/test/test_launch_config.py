@@ -37,7 +37,7 @@ def test_robot_count_takes_the_first_robots_and_their_start_poses():
     (dict(scenario="couple2", robots="-2"), "at least 1"),
     (dict(scenario="couple2", robots="two"), "expected a robot count"),
     (dict(scenario="couple2", robots="5"), "robots:=5 but scenario couple2 has 2 robot(s): pz1, pz2"),
-    (dict(scenario="couple4_line", robots="2"), "robots:=2 keeps pz1, pz2"),     # its decouple step names pz3
+    (dict(scenario="couple4_line", robots="1"), "robots:=1 keeps pz1"),     # its decouple step names pz2
     (dict(scenario="couple2", world="moon"), "world:=moon: unknown world 'moon'; known worlds: flat, gap, step"),
     (dict(scenario="couple2", robots="/nonexistent/list.yaml"), "robot list file /nonexistent/list.yaml does not exist"),
 ])

@@ -43,7 +43,7 @@ def test_every_arg_is_documented(name):
 def test_sim_launch_defaults_and_options():
     c = load_launch("sim")
     assert node_names(c) == ["mpc", "scenario_runner", "sim"]
-    assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2"]   # pair_cycle
+    assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2", "pz3", "pz4"]
     assert c.params["/sim/sim/world"].value == "flat" and c.params["/use_sim_time"].value is True
     assert c.params["/sim/sim/mocap_position_std"].value == 0.0003 and c.params["/sim/sim/seed"].value == 0
     c = load_launch("sim", mocap="ideal", seed="7")
