@@ -151,7 +151,7 @@ def write_csv(path, robots, t0=0.0):
 def write_bag(path, robots, t0=1.7e9, cmd_robots=None, pose_robots=None):
     """ROS 1 bag: /vicon/<r>/<r> TransformStamped (header stamp = pose time) and
     /<r>/cmd_vel Twist (record time = command time). No roscore needed."""
-    import rosbag
+    from puzzlebot_mpc.identify.data import write_messages
     import rospy
     from geometry_msgs.msg import TransformStamped, Twist
 
@@ -177,7 +177,4 @@ def write_bag(path, robots, t0=1.7e9, cmd_robots=None, pose_robots=None):
                 m = Twist()
                 m.linear.x, m.angular.z = v, w
                 msgs.append((t0 + t, names.cmd_vel_topic(name), m))
-    msgs.sort(key=lambda item: item[0])
-    with rosbag.Bag(path, "w") as bag:
-        for t, topic, m in msgs:
-            bag.write(topic, m, rospy.Time.from_sec(t))
+    write_messages(path, msgs)

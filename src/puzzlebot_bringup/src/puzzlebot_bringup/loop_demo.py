@@ -300,7 +300,7 @@ def tracking_run(cfg, model, seed, legs=None, record=False):
 def write_bag(path, record, t0=BAG_T0):
     """ROS 1 bag like record.launch's: /vicon/<r>/<r> TransformStamped (header stamp = pose time) and
     /<r>/cmd_vel Twist (record time = command time). No roscore needed."""
-    import rosbag
+    from puzzlebot_mpc.identify.data import write_messages
     import rospy
     from geometry_msgs.msg import TransformStamped, Twist
 
@@ -320,10 +320,7 @@ def write_bag(path, record, t0=BAG_T0):
             m = Twist()
             m.linear.x, m.angular.z = v, w
             msgs.append((t0 + t, topics.cmd_vel_topic(name), m))
-    msgs.sort(key=lambda item: item[0])
-    with rosbag.Bag(path, "w") as bag:
-        for t, topic, m in msgs:
-            bag.write(topic, m, rospy.Time.from_sec(t))
+    write_messages(path, msgs)
 
 
 # --------------------------------------------------------------- coupling

@@ -141,6 +141,17 @@ def _discover(topics, path):
     return pairs
 
 
+def write_messages(path, messages):
+    """Write ``messages`` -- (time [s], topic, ROS message) -- to a new bag at ``path``, in time order
+    (each recorded at its time: for /cmd_vel the record time is the command time, as read_bag expects)."""
+    import rosbag
+    import rospy
+
+    with rosbag.Bag(path, "w") as bag:
+        for t, topic, m in sorted(messages, key=lambda item: item[0]):
+            bag.write(topic, m, rospy.Time.from_sec(t))
+
+
 def read_bag(path, robots=None):
     import rosbag
 
