@@ -13,7 +13,9 @@ from puzzlebot_msgs.msg import BehaviorStatus, SolverStats
 from puzzlebot_msgs.srv import SetBehavior, SetBehaviorRequest
 
 GOALS = {"pz1": (0.25, 0.05), "pz2": (-0.05, 0.30), "pz3": (0.15, -0.20)}
-TOLERANCE = 0.005      # m
+TOLERANCE = 0.005      # m, asserted on the test's own copy of the vicon poses
+REQUESTED = 0.004      # m, asked of the MPC: it decides on its own noisy poses (0.3 mm Vicon noise) while
+                       # the robots still creep, so the test's copy may read a few tenths of a mm farther
 SIM_BOUND = 30.0       # s of simulated time
 WALL_LIMIT = 180.0     # s, only so a hung simulation cannot hang the test
 
@@ -46,7 +48,7 @@ class GotoThree(unittest.TestCase):
         names = sorted(GOALS)
         resp = self.call(SetBehaviorRequest(behavior="go_to_goal", robots=names,
                                             goals=[Point(GOALS[n][0], GOALS[n][1], 0) for n in names],
-                                            tolerance=TOLERANCE))
+                                            tolerance=REQUESTED))
         self.assertTrue(resp.accepted, resp.message)
         t0, wall0 = rospy.get_time(), time.monotonic()
         while time.monotonic() - wall0 < WALL_LIMIT and rospy.get_time() - t0 < SIM_BOUND:
