@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
-from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify
+from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify, classify_knob
 from puzzlebot_sim.params import AnchorParams, RobotParams
 
 
@@ -68,3 +68,31 @@ def test_classify_coupling_states():
     assert classify(*points(*too_high), p) == DECOUPLED
     in_lock_slot = ((h - 0.012, 0.0, z + p.mouth_height / 2 + 0.003), seated[1])
     assert classify(*points(*in_lock_slot), p) == HEAD_INSERTED
+
+
+def test_classify_knob_states():
+    p = RobotParams()
+    face, z = -p.body_side / 2, p.knob_z           # the hole robot's right face; the knob's height
+    assert classify_knob((0.0, face, z), p) == HEAD_INSERTED                 # sides touching, knob centred
+    assert classify_knob((0.0005, face + 0.0005, z + 0.001), p) == HEAD_INSERTED
+    assert classify_knob((0.0, face - 0.003, z), p) == HEAD_ALIGNED          # 3 mm gap: only the rim is in
+    assert classify_knob((0.003, face, z), p) == HEAD_ALIGNED                # against the hole's edge
+    assert classify_knob((0.0, face - 0.005, z), p) == DECOUPLED             # gap wider than the knob's reach
+    assert classify_knob((0.015, face, z), p) == DECOUPLED                   # beside the hole
+    assert classify_knob((0.0, face, z + 0.012), p) == DECOUPLED             # above it
+    assert classify_knob((0.0, -face, z), p) == DECOUPLED                    # on the wrong side
+
+
+def test_physical_knob_pairs_message():
+    from puzzlebot_msgs.msg import ConnectionPair
+    from puzzlebot_sim.coupling import PhysicalPair
+    from puzzlebot_sim.ros_conversions import physical_pairs_msg
+
+    msg = physical_pairs_msg([PhysicalPair("pz1", "pz2", HEAD_INSERTED),
+                              PhysicalPair("pz3", "pz1", HEAD_ALIGNED, knob=True)], None, 0.05)
+    anchor, knob = msg.pairs
+    assert anchor.type == ConnectionPair.TYPE_ANCHOR and anchor.anchor_robot == "pz1"
+    assert (anchor.point_i.x, anchor.point_j.x) == (-0.025, 0.025)
+    assert knob.type == ConnectionPair.TYPE_KNOB and knob.anchor_robot == ""
+    assert (knob.robot_i, knob.robot_j, knob.status) == ("pz3", "pz1", HEAD_ALIGNED)
+    assert (knob.point_i.y, knob.point_j.y) == (0.025, -0.025)

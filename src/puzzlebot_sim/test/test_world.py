@@ -57,6 +57,19 @@ def test_robot_drives_straight_and_turns():
         assert w.time == pytest.approx(2.5)
 
 
+def test_knob_in_a_neighbours_hole_is_a_physical_knob_pair():
+    # pz2 beside pz1 on its right: pz2's knob (left side) sits in pz1's hole (right side); pz3 is apart
+    p = RobotParams()
+    starts = [RobotStart("pz1", 0, 0, 0), RobotStart("pz2", 0, -p.body_side - 0.0002, 0),
+              RobotStart("pz3", 0.2, 0, 0)]
+    with SimWorld(p, starts) as w:
+        w.run(0.3)
+        pairs = w.physical_knob_pairs()
+        assert [(q.anchor_robot, q.opening_robot, q.status, q.knob) for q in pairs] == [
+            ("pz2", "pz1", HEAD_INSERTED, True)]
+        assert not [q for q in w.physical_pairs() if q.knob]                  # anchor pairs stay separate
+
+
 @pytest.mark.parametrize("v", [0.05, 0.2])
 def test_commanded_speed_is_driven_within_one_percent(v):
     # The wheels' collision spheres have the exact 10 mm radius and carry the weight (casters just

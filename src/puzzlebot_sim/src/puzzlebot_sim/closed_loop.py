@@ -175,8 +175,9 @@ class ClosedLoop:
         return RUNNING, (st.message if st else "not started"), self.world.time - t0
 
     def physical(self):
-        """{(anchor robot, opening robot): status} read off the Bullet bodies."""
-        return {(p.anchor_robot, p.opening_robot): p.status for p in self.world.physical_pairs()}
+        """{(anchor robot, opening robot) or (knob robot, hole robot): status} read off the Bullet bodies."""
+        return {(p.anchor_robot, p.opening_robot): p.status
+                for p in self.world.physical_pairs() + self.world.physical_knob_pairs()}
 
 
 def make_world(cfg, starts, seed, mocap=None, world="flat"):

@@ -10,6 +10,11 @@ polygon model does):
   face, within the slit width and height) but the tips are not both seated;
 * ``DECOUPLED`` otherwise.
 
+A knob-hole pair (side connection) is read off the knob robot's pose in the
+hole robot's frame (:func:`classify_knob`): ``HEAD_INSERTED`` when the knob
+sits in the hole (the two sides touch, the knob within the hole's width and
+height), ``HEAD_ALIGNED`` when it is only partly in, ``DECOUPLED`` otherwise.
+
 The numeric values match puzzlebot_msgs/ConnectionPair's STATUS_* constants.
 """
 
@@ -29,6 +34,7 @@ class PhysicalPair:
     anchor_robot: str
     opening_robot: str
     status: int
+    knob: bool = False     # a knob-hole pair: anchor_robot carries the knob, opening_robot has the hole
 
     @property
     def status_name(self):
@@ -60,3 +66,23 @@ def classify(head_tip, barb_tips, rp, tolerance=0.0005):
     seated = all(_in_opening(t, rp, tolerance) and t[0] < behind_lips
                  and abs(t[1]) >= rp.mouth_width / 2.0 - tolerance for t in barb_tips)
     return HEAD_INSERTED if seated else HEAD_ALIGNED
+
+
+def classify_knob(knob_centre, rp, tolerance=0.001):
+    """Status of a knob whose centre (x, y, z) [m] is given in the hole robot's base_link.
+
+    The hole is a pocket in the right side (y = -body_side/2) at height
+    ``knob_z``; a knob of the neighbour on that side has its centre on the
+    neighbour's left face, so with the two sides touching it lies on this
+    robot's right face. ``tolerance`` [m] absorbs the gap between the sides
+    and contact penetration.
+    """
+    x, y, z = knob_centre
+    gap = -rp.body_side / 2.0 - y                     # > 0: the knob robot's side is this far away
+    dz = abs(z - rp.knob_z)
+    if not -rp.hole_depth <= gap < rp.knob_radius or abs(x) >= rp.hole_width / 2.0 + rp.knob_radius \
+            or dz >= (rp.hole_height + rp.knob_height) / 2.0:
+        return DECOUPLED
+    inside = (gap <= tolerance and abs(x) <= rp.hole_width / 2.0 - rp.knob_radius + tolerance
+              and dz <= (rp.hole_height - rp.knob_height) / 2.0 + tolerance)
+    return HEAD_INSERTED if inside else HEAD_ALIGNED

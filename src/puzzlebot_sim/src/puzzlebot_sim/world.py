@@ -684,6 +684,28 @@ class SimWorld(BulletSession):
                     out.append(coupling.PhysicalPair(a_name, o_name, status))
         return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
 
+    def physical_knob_pairs(self):
+        """Knob-hole pairs read off the robots' poses (puzzlebot_sim.coupling.classify_knob).
+
+        Returns PhysicalPair(knob robot, hole robot, status, knob=True) for
+        every knob at least partly in a neighbour's side hole (sorted by names).
+        """
+        c, p = self.client, self.params
+        poses = {n: self.pose(n) for n in self.names}
+        out = []
+        for k_name in self.names:
+            knob = pb.multiplyTransforms(*poses[k_name], [0.0, p.body_side / 2.0, p.knob_z], [0, 0, 0, 1],
+                                         physicsClientId=c)[0]
+            for h_name in self.names:
+                if h_name == k_name:
+                    continue
+                inv_pos, inv_orn = pb.invertTransform(*poses[h_name], physicsClientId=c)
+                local = pb.multiplyTransforms(inv_pos, inv_orn, knob, [0, 0, 0, 1], physicsClientId=c)[0]
+                status = coupling.classify_knob(local, p)
+                if status != coupling.DECOUPLED:
+                    out.append(coupling.PhysicalPair(k_name, h_name, status, knob=True))
+        return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
+
     def measure(self, name):
         """Mocap measurement of the robot: (position xyz, quaternion xyzw), or None if dropped.
 
