@@ -34,7 +34,7 @@ def physical_pairs_msg(pairs, stamp, body_side):
     for p in pairs:
         cp = ConnectionPair()
         cp.robot_i, cp.robot_j = p.anchor_robot, p.opening_robot
-        if getattr(p, "knob", False):
+        if p.knob:
             cp.point_i = Pose2D(x=0.0, y=body_side / 2.0, theta=math.pi / 2.0)
             cp.point_j = Pose2D(x=0.0, y=-body_side / 2.0, theta=-math.pi / 2.0)
             cp.type = ConnectionPair.TYPE_KNOB

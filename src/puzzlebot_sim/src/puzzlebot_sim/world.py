@@ -692,6 +692,7 @@ class SimWorld(BulletSession):
         """
         c, p = self.client, self.params
         poses = {n: self.pose(n) for n in self.names}
+        inverse = {n: pb.invertTransform(*poses[n], physicsClientId=c) for n in self.names}
         out = []
         for k_name in self.names:
             knob = pb.multiplyTransforms(*poses[k_name], [0.0, p.body_side / 2.0, p.knob_z], [0, 0, 0, 1],
@@ -699,8 +700,7 @@ class SimWorld(BulletSession):
             for h_name in self.names:
                 if h_name == k_name:
                     continue
-                inv_pos, inv_orn = pb.invertTransform(*poses[h_name], physicsClientId=c)
-                local = pb.multiplyTransforms(inv_pos, inv_orn, knob, [0, 0, 0, 1], physicsClientId=c)[0]
+                local = pb.multiplyTransforms(*inverse[h_name], knob, [0, 0, 0, 1], physicsClientId=c)[0]
                 status = coupling.classify_knob(local, p)
                 if status != coupling.DECOUPLED:
                     out.append(coupling.PhysicalPair(k_name, h_name, status, knob=True))
