@@ -10,6 +10,7 @@ simulation publishes it) and the robots' vicon topics; calls
 /puzzlebot/mpc/set_behavior.
 """
 
+import collections
 import math
 import threading
 import time
@@ -30,6 +31,10 @@ STATUS_TEXT = {ConnectionPair.STATUS_DECOUPLED: "decoupled", ConnectionPair.STAT
 PHYSICAL_TEXT = {ConnectionPair.STATUS_HEAD_ALIGNED: "head in", ConnectionPair.STATUS_HEAD_INSERTED: "seated"}
 POLL = 0.01   # s (wall) between checks of the behaviour status
 SETTLE = 2.0  # s of simulated time added to a step's timeout before the runner gives up on its status
+START_DELAY = 1.0   # s of ROS time at least between submitting a script of steps and its first step ...
+SCRIPT_START = 3.0  # s: ... which starts at this ROS time at the earliest: in a simulation (time from 0) a
+                    # script then starts at the same control step whatever the graph's start-up timing
+POSE_HISTORY = 2000  # vicon samples kept per robot (20 s at 100 Hz), for the pose at a step's end
 
 
 def pairs_text(msg):
@@ -60,24 +65,35 @@ class Runner:
         self.physical = None    # latest /puzzlebot/sim/physical_pairs
         self.physical_log = []  # (stamp, msg) of every physical pairs message (tests)
         self.pairs_log = []     # (stamp, msg) of every connection pairs message (tests)
+        self.pose_log = {r.name: collections.deque(maxlen=POSE_HISTORY) for r in robots}  # (stamp, pose)
+        self.started = {}       # request id -> stamp of its first status that was not IDLE
+        self.ended = {}         # request id -> its final BehaviorStatus (SUCCEEDED or FAILED)
         self.solved = False
         self.failed_solves = 0
+        self.failed_stamps = []     # stamps of the failed MPC steps
         rospy.Subscriber(names.BEHAVIOR_STATUS_TOPIC, BehaviorStatus, self._on_status, queue_size=10)
         rospy.Subscriber(names.SOLVER_STATS_TOPIC, SolverStats, self._on_stats, queue_size=10)
         rospy.Subscriber(names.CONNECTION_PAIRS_TOPIC, ConnectionPairArray, self._on_pairs, queue_size=10)
         rospy.Subscriber(names.PHYSICAL_PAIRS_TOPIC, ConnectionPairArray, self._on_physical, queue_size=10)
         for r in robots:
-            rospy.Subscriber(r.vicon_topic, TransformStamped, self._on_pose, callback_args=r.name, queue_size=1)
+            rospy.Subscriber(r.vicon_topic, TransformStamped, self._on_pose, callback_args=r.name, queue_size=20)
         self.call = None
 
     # ------------------------------------------------------------ callbacks
     def _on_status(self, msg):
         self.status = msg
+        stamp = msg.header.stamp.to_sec()
+        with self.lock:
+            if msg.state != BehaviorStatus.IDLE:
+                self.started.setdefault(msg.request_id, stamp)
+            if msg.state in (BehaviorStatus.SUCCEEDED, BehaviorStatus.FAILED):
+                self.ended.setdefault(msg.request_id, msg)
 
     def _on_stats(self, msg):
         self.solved = self.solved or msg.success
         if not msg.success:
             self.failed_solves += 1
+            self.failed_stamps.append(msg.header.stamp.to_sec())
 
     def _on_pairs(self, msg):
         with self.lock:
@@ -91,7 +107,10 @@ class Runner:
 
     def _on_pose(self, msg, name):
         t, q = msg.transform.translation, msg.transform.rotation
-        self.poses[name] = (t.x, t.y, t.z, yaw_from_quaternion(q.x, q.y, q.z, q.w))
+        pose = (t.x, t.y, t.z, yaw_from_quaternion(q.x, q.y, q.z, q.w))
+        self.poses[name] = pose
+        with self.lock:
+            self.pose_log[name].append((msg.header.stamp.to_sec(), pose))
 
     # ---------------------------------------------------------------- setup
     def connect(self, service_timeout=120.0, control_timeout=60.0):
@@ -111,32 +130,100 @@ class Runner:
             time.sleep(POLL)
 
     # ---------------------------------------------------------------- steps
-    def run_step(self, step, default_timeout, wall_deadline):
-        """Request one step and wait for its final status; a StepResult (sim_seconds in ROS time)."""
-        t0 = rospy.get_time()
-        resp = self.call(step_request(step))
-        if not resp.accepted:
-            return StepResult(step, "refused", resp.message, 0.0)
-        limit = (step.timeout or default_timeout) + SETTLE
-        outcome, message = "timeout", "no final status from the MPC node"
-        while not rospy.is_shutdown() and time.monotonic() < wall_deadline:
-            s = self.status
-            if s is not None and s.request_id == resp.request_id and s.state in (
-                    BehaviorStatus.SUCCEEDED, BehaviorStatus.FAILED):
-                outcome = "succeeded" if s.state == BehaviorStatus.SUCCEEDED else "failed"
-                message = s.message
+    def submit(self, steps, start_delay=START_DELAY):
+        """Request every step at once: the first starts ``start_delay`` s of ROS time from now, each
+        next one is queued behind the one before (the MPC starts it at the control step after that
+        one ends; SetBehavior.srv). In lockstep with the simulation the run is then the same
+        whatever the timing of these calls (in simulated time the first step starts at
+        SCRIPT_START unless later). Returns one entry per step: its request id, or a
+        StepResult for a step the MPC refused (the steps after it are not sent)."""
+        out = []
+        start = max(rospy.get_time() + start_delay, SCRIPT_START if start_delay > 0 else 0.0)
+        for k, step in enumerate(steps):
+            req = step_request(step)
+            req.queue, req.start_time = k > 0, start if k == 0 and start_delay > 0 else 0.0
+            resp = self.call(req)
+            if not resp.accepted:
+                out.append(StepResult(step, "refused", resp.message, 0.0))
                 break
-            if rospy.get_time() - t0 > limit:
+            out.append(resp.request_id)
+        return out
+
+    def run_steps(self, steps, default_timeout, wall_deadline, start_delay=START_DELAY):
+        """Submit ``steps`` (submit) and yield each one's StepResult in order as it ends; stops after
+        the first step that does not succeed (the MPC drops the ones queued behind it)."""
+        for step, entry in zip(steps, self.submit(steps, start_delay)):
+            result = entry if isinstance(entry, StepResult) else self.wait_step(step, entry, default_timeout,
+                                                                                wall_deadline)
+            yield result
+            if result.outcome != "succeeded":
+                return
+
+    def run_step(self, step, default_timeout, wall_deadline):
+        """Request one step now and wait for its final status; a StepResult."""
+        return next(self.run_steps([step], default_timeout, wall_deadline, start_delay=0.0))
+
+    def wait_step(self, step, request_id, default_timeout, wall_deadline):
+        """Wait for the final status of request ``request_id`` (``step``): a StepResult whose
+        sim_seconds, final errors and pairs are those of the control step that ended it."""
+        limit = (step.timeout or default_timeout) + SETTLE
+        t_wait = rospy.get_time()
+        outcome, message, final = "timeout", "no final status from the MPC node", None
+        while not rospy.is_shutdown() and time.monotonic() < wall_deadline:
+            with self.lock:
+                final, started = self.ended.get(request_id), self.started.get(request_id)
+            if final is not None:
+                outcome = "succeeded" if final.state == BehaviorStatus.SUCCEEDED else "failed"
+                message = final.message
+                break
+            if rospy.get_time() - max(t_wait, started if started is not None else -math.inf) > limit:
                 message = "no result within %.1f s of simulated time" % limit
                 break
             time.sleep(POLL)
+        with self.lock:
+            start = self.started.get(request_id, t_wait)
+        end = final.header.stamp.to_sec() if final is not None else rospy.get_time()
+        self.wait_until(end + 0.2)       # the pair and pose messages of that step have arrived
         errors = {}
         for name, goal in zip(step.robots, step.goals):
-            if name in self.poses:
-                errors[name] = math.hypot(self.poses[name][0] - goal[0], self.poses[name][1] - goal[1])
-        pairs = pairs_text(self.pairs) if step.behavior in ("couple", "decouple", "drive_assembly") else ""
-        if pairs and self.physical is not None:      # simulation: the anchors themselves
-            pairs += "; physically: " + (", ".join(
-                "%s->%s %s" % (p.robot_i, p.robot_j, PHYSICAL_TEXT.get(p.status, "?")) for p in self.physical.pairs)
-                or "no anchor in an opening")
-        return StepResult(step, outcome, message, rospy.get_time() - t0, errors, pairs)
+            pose = self.pose_at(name, end)
+            if pose is not None:
+                errors[name] = math.hypot(pose[0] - goal[0], pose[1] - goal[1])
+        pairs = ""
+        if step.behavior in ("couple", "decouple", "drive_assembly"):
+            pairs = pairs_text(self.pairs_at(end))
+            physical = self.physical_at(end)
+            if physical is not None:      # simulation: the anchors themselves
+                pairs += "; physically: " + (", ".join(
+                    "%s->%s %s" % (p.robot_i, p.robot_j, PHYSICAL_TEXT.get(p.status, "?")) for p in physical.pairs)
+                    or "no anchor in an opening")
+        return StepResult(step, outcome, message, end - start, errors, pairs, start, end)
+
+    # ------------------------------------------------- state at a given time
+    def wait_until(self, stamp, wall_timeout=60.0):
+        """Wait until ROS time reaches ``stamp`` [s] (bounded in wall time)."""
+        end = time.monotonic() + wall_timeout
+        while rospy.get_time() < stamp and not rospy.is_shutdown() and time.monotonic() < end:
+            time.sleep(POLL)
+
+    def pairs_at(self, stamp):
+        """The MPC's connection pairs message of the control step at ``stamp`` (the first at or after it)."""
+        return _first_at(self.pairs_log, stamp, self.lock)
+
+    def physical_at(self, stamp):
+        """The simulation's physical pairs message at ``stamp`` (the first at or after it); None without one."""
+        return _first_at(self.physical_log, stamp, self.lock)
+
+    def pose_at(self, name, stamp):
+        """(x, y, z, yaw) of ``name`` from its vicon topic at ``stamp`` (the first at or after it, else
+        the latest); None without any."""
+        with self.lock:
+            history = list(self.pose_log.get(name, ()))
+        after = [pose for t, pose in history if t >= stamp - 1e-6]
+        return after[0] if after else (history[-1][1] if history else None)
+
+
+def _first_at(log, stamp, lock):
+    with lock:
+        after = [msg for t, msg in log if t >= stamp - 1e-6]
+    return after[0] if after else None

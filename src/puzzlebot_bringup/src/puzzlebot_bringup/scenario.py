@@ -103,6 +103,8 @@ class StepResult:
     sim_seconds: float
     final_errors: Dict[str, float] = field(default_factory=dict)
     pairs: str = ""              # connection pairs at the end of the step (coupling steps)
+    start: float = float("nan")  # s, ROS time of the step's first control step (its status stamps)
+    end: float = float("nan")    # s, ROS time of the control step that ended it
 
 
 def _pairs(value, where, robots, width):

@@ -82,6 +82,10 @@ class BehaviorRequest:
     slots: Sequence[Tuple[float, float, float]] = ()  # couple: explicit slots (assembly frame)
     pair: Sequence[str] = ()                       # decouple: the two robots
     distance: float = 0.0                          # drive_assembly: metres to drive (0: for timeout s)
+    # Scheduling (ControlLoop.request): when the behaviour starts.
+    queue: bool = False          # start once the running behaviour and those queued before it have ended
+                                 # (dropped if one of them fails); False: replace the running one now
+    start_time: float = 0.0      # [s] ROS time: start at the first control step at or after it; 0 = at once
 
 
 @dataclass
@@ -175,7 +179,8 @@ class BehaviorManager:
         self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin,
                                              settings.seating())
         self.targets = dict(targets or {})
-        self._request_id = 0
+        self._request_id = 0             # id of the current behaviour
+        self._last_id = 0                # last id handed out (requests queued in ControlLoop get theirs early)
         self._req = BehaviorRequest(STOP)
         self._robots = []
         self._start = None
@@ -192,9 +197,36 @@ class BehaviorManager:
         self._last_progress = ""
 
     # ------------------------------------------------------------- requests
-    def validate(self, req, poses=None):
-        """Return the list of robots a request applies to, or raise BehaviorError."""
-        return self._check(req, poses)[0]
+    def validate(self, req):
+        """The checks that do not depend on the robots' state (names, numbers, targets, limits): the
+        robots the request applies to, or BehaviorError. A request queued for later passes these when
+        queued and the rest when it starts."""
+        return self._check(req, None)[0]
+
+    def new_id(self):
+        """A fresh request id (ids increase by one per accepted or queued request)."""
+        self._last_id += 1
+        return self._last_id
+
+    @property
+    def state(self):
+        """IDLE, RUNNING, SUCCEEDED or FAILED: the current behaviour's state."""
+        return self._state
+
+    @property
+    def request_id(self):
+        """The current behaviour's request id (0 before the first request)."""
+        return self._request_id
+
+    def refuse(self, request_id, req, message):
+        """Report request ``request_id`` (queued, now due) as FAILED with ``message``; the robots rest."""
+        self._req, self._robots, self._request_id = req, list(req.robots), request_id
+        self._state, self._message = FAILED, message
+        self._rest()
+
+    def note(self, text):
+        """Append ``text`` to the current status message (e.g. queued requests dropped)."""
+        self._message += text
 
     def _check(self, req, poses):
         """(robots, couple assignment or decouple pair or None), or raise BehaviorError."""
@@ -296,6 +328,8 @@ class BehaviorManager:
         unknown = [r for r in req.pair if r not in self.index]
         if unknown:
             raise BehaviorError("decouple: unknown robot(s) %s" % ", ".join(map(repr, unknown)))
+        if poses is None:               # validate(): whether they are coupled is checked when it starts
+            return None
         pair = self.pairs.find(*req.pair)
         if pair is None or pair.key not in self.pairs.coupled:
             raise BehaviorError("decouple: %s and %s are not coupled; coupled pairs: %s"
@@ -311,11 +345,12 @@ class BehaviorManager:
         self._need_poses(list(req.pair), poses, "decouple")
         return pair
 
-    def request(self, req, now, poses=None):
+    def request(self, req, now, poses=None, request_id=None):
         """Validate and start a behaviour at time ``now`` [s]; return its id.
 
         ``poses``: name -> (x, y, theta) or None; needed by couple, decouple
         and drive_assembly (a missing pose refuses those requests).
+        ``request_id``: the id handed out when the request was queued (None: a new one).
         """
         if req.behavior in (COUPLE, DECOUPLE, DRIVE_ASSEMBLY) and poses is None:
             raise BehaviorError("%s needs the robots' current poses" % req.behavior)
@@ -337,7 +372,7 @@ class BehaviorManager:
         # accepted: replace the running behaviour
         self._finish_decouple(poses)
         self.pairs.clear_goals()
-        self._request_id += 1
+        self._request_id = self.new_id() if request_id is None else request_id
         self._req, self._robots, self._start = req, robots, now
         self._static = obj
         self._assignment = assignment

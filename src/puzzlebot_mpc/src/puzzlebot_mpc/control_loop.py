@@ -25,11 +25,14 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
-from puzzlebot_mpc.behaviors import BehaviorManager
+from puzzlebot_mpc.behaviors import FAILED, RUNNING, BehaviorError, BehaviorManager
 from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
 from puzzlebot_mpc.model import NX
 from puzzlebot_mpc.pairs import PairBook
+
+
+_TIME_EPS = 1e-6   # s: a start time this close to a control step's time is due at that step
 
 
 @dataclass
@@ -92,6 +95,7 @@ class ControlLoop:
         self.poses = PoseBook(self.names, settings.pose_timeout)
         self.pairs = PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating())
         self.behaviors = BehaviorManager(self.names, settings, self.geometry, self.pairs, targets)
+        self._pending = []              # (request id, BehaviorRequest) waiting to start, in order
         self.mpc = MultiRobotMPC(settings, len(self.names)).setup()
         self._last_cmd = np.zeros((len(self.names), 2))
         # Identified actuator effects (effects.ActuatorModel), None = plain unicycle: see compensation.py.
@@ -106,8 +110,54 @@ class ControlLoop:
         return {name: self.poses.fresh(name, now) for name in self.names}
 
     def request(self, req, now):
-        """Validate and start a behaviour (behaviors.BehaviorManager.request) with the current poses."""
-        return self.behaviors.request(req, now, self.fresh_poses(now))
+        """Start a behaviour now, or queue it; return its request id (BehaviorError: refused).
+
+        ``req.queue`` false and ``req.start_time`` not in the future: validated
+        against the current poses and started now (BehaviorManager.request);
+        it replaces the running behaviour and cancels every queued request.
+        Otherwise the request passes the state-free checks now
+        (BehaviorManager.validate) and waits: for ``start_time`` [s, ROS time]
+        and, with ``queue``, for the running behaviour and those queued before
+        it to end. It starts at the first control step where both hold, with
+        the poses of that step, so a script of behaviours runs the same way
+        whatever the timing of the calls (lockstep simulation: repeatable). A
+        queued request is dropped if one before it fails, and reported FAILED
+        if its state checks fail when it is due.
+        """
+        if not math.isfinite(req.start_time) or req.start_time < 0:
+            raise BehaviorError("start_time must be finite and >= 0 (got %r)" % req.start_time)
+        if not req.queue and req.start_time <= now + _TIME_EPS:
+            request_id = self.behaviors.request(req, now, self.fresh_poses(now))
+            self._pending.clear()
+            return request_id
+        self.behaviors.validate(req)
+        if req.queue and not self._pending and self.behaviors.state == FAILED:
+            raise BehaviorError("queue: the current behaviour (request %d) failed; nothing to queue behind"
+                                % self.behaviors.request_id)
+        request_id = self.behaviors.new_id()
+        self._pending.append((request_id, req))
+        return request_id
+
+    def pending(self):
+        """Ids of the requests waiting to start, in order."""
+        return [request_id for request_id, _ in self._pending]
+
+    def _start_due(self, now, poses):
+        """Start the queued requests that are due (see request)."""
+        while self._pending:
+            request_id, req = self._pending[0]
+            if req.start_time > now + _TIME_EPS or (req.queue and self.behaviors.state == RUNNING):
+                return
+            self._pending.pop(0)
+            if req.queue and self.behaviors.state == FAILED:
+                dropped = [request_id] + self.pending()
+                self._pending.clear()
+                self.behaviors.note("; queued request(s) %s dropped" % ", ".join(map(str, dropped)))
+                return
+            try:
+                self.behaviors.request(req, now, poses, request_id=request_id)
+            except BehaviorError as e:
+                self.behaviors.refuse(request_id, req, "refused when due: %s" % e)
 
     def pair_keys(self):
         """The current pair slots as robot index tuples (the MPC structure's key)."""
@@ -117,6 +167,7 @@ class ControlLoop:
     def step(self, now):
         n = len(self.names)
         poses = self.fresh_poses(now)
+        self._start_due(now, poses)
         newly, lost = self.pairs.update(poses, now)
         status = self.behaviors.update(now, poses, newly, lost)
         stale = [name for name in self.names if poses[name] is None]
