@@ -54,3 +54,20 @@ def test_figures_are_written(tmp_path):
     assert "| 4 | 1.2 / 1.5 | 4.0 / 5.0 | 0 |" in page.bench_table(bench)
     for name in ("c", "d", "b"):
         assert os.path.getsize(str(tmp_path / ("%s.png" % name))) > 5000
+
+
+def _chain(seed, ok, pair=None):
+    sep = None if ok else {"pair": pair, "time_s": 1.25, "pitch_rad": {"r1": 0.0, "r2": -0.3, "r3": -1.1},
+                           "max_barb_rad": 1.9, "snap_rad": 0.84, "max_pullout_mm": 6.5}
+    return {"seed": seed, "success": ok, "robots": 3, "upright_on_floor": 3 if ok else 1,
+            "time_s": 12.0 if ok else None, "first_separation": sep}
+
+
+def test_chain_table_and_figure_per_seed(tmp_path):
+    recs = [_chain(2, False, "r2>r3"), _chain(1, True), _chain(3, False, "r1>r2")]
+    rows = page.chain_table(recs).splitlines()
+    assert rows[2].startswith("| 1 | **down** in 12.0 s | 3 of 3 | - |")
+    assert rows[3] == ("| 2 | apart | 1 of 3 | r2>r3 | 1.25 | r1 0.00, r2 -0.30, r3 -1.10 | 1.90 / 0.84 | 6.5 |")
+    assert rows[-1].startswith("| **all** | **1 of 3 down intact** |")
+    page.chain_figure(recs, str(tmp_path / "chain.png"))
+    assert os.path.getsize(str(tmp_path / "chain.png")) > 5000

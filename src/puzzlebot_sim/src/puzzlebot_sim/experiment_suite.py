@@ -128,6 +128,7 @@ def run(args, out=sys.stdout):
     summary["chain_wall_s"] = round(time.monotonic() - t, 1)
     summary["chain"] = {"trials": len(chain), "successes": sum(bool(r["success"]) for r in chain)}
     blocks["chain_table"] = page.chain_table(chain)
+    page.chain_figure(chain, os.path.join(args.img, "results_chain.png"))
 
     summary["wall_s"] = round(time.monotonic() - t0, 1)
     blocks["run_info"] = run_info(summary)

@@ -109,9 +109,27 @@ def force_table(summary):
 
 
 def chain_table(records):
+    """Per seed: outcome, robots upright on the floor, and the first pair that came apart (when, the
+    pitch of every robot then, that pair's largest barb angle against the snap angle, and how far its
+    anchor was pulled out of its holder); a total row."""
+    rows = ["| seed | outcome | upright on the floor | first pair apart (anchor>opening) | at [s] | "
+            "pitch then [rad] | barb max / snap [rad] | anchor pulled out [mm] |",
+            "|---|---|---|---|---|---|---|---|"]
+    for r in sorted(records, key=lambda r: r["seed"]):
+        f = r.get("first_separation")
+        if r["success"]:
+            outcome = "**down** in %s s" % _fmt(r.get("time_s"), "%.1f")
+        else:
+            outcome = "apart" if f else "not down"
+        sep = ["-"] * 5
+        if f:
+            sep = [f["pair"], "%.2f" % f["time_s"], ", ".join("%s %.2f" % kv for kv in sorted(f["pitch_rad"].items())),
+                   "%.2f / %.2f" % (f["max_barb_rad"], f["snap_rad"]), "%.1f" % f["max_pullout_mm"]]
+        rows.append("| %s | %s | %d of %d | %s |" % (r["seed"], outcome, r["upright_on_floor"], r["robots"],
+                                                   " | ".join(sep)))
     ok = sum(bool(r["success"]) for r in records)
-    return "\n".join(["| trials | success | seeds |", "|---|---|---|",
-                      "| %d | %d | %s |" % (len(records), ok, ", ".join(str(r["seed"]) for r in records))])
+    rows.append("| **all** | **%d of %d down intact** | | | | | | |" % (ok, len(records)))
+    return "\n".join(rows)
 
 
 def read_force_csv(path):
@@ -210,6 +228,38 @@ def force_figure(d, fwd, back, path):
     ax.set_xlabel("probe displacement [mm]")
     ax.set_ylabel("force [N]")
     _finish(fig, (ax,), path)
+
+
+def chain_figure(records, path):
+    """Left: per seed, when the first pair came apart (marker: which pair) or when the chain was down.
+    Right: the separating pair's largest barb angle against the snap angle (beyond it the barbs fold
+    and the anchor comes out through the force profile)."""
+    plt = _plt()
+    recs = sorted(records, key=lambda r: r["seed"])
+    seeds = [r["seed"] for r in recs]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    pairs = sorted({r["first_separation"]["pair"] for r in recs if r.get("first_separation")})
+    for k, pair in enumerate(pairs):
+        pts = [(r["seed"], r["first_separation"]["time_s"]) for r in recs
+               if r.get("first_separation") and r["first_separation"]["pair"] == pair]
+        a1.plot([p[0] for p in pts], [p[1] for p in pts], "x", ms=9, mew=2, color="C%d" % (k + 3),
+                label="pair %s came apart" % pair)
+    down = [(r["seed"], r["time_s"]) for r in recs if r["success"] and r.get("time_s") is not None]
+    if down:
+        a1.plot([p[0] for p in down], [p[1] for p in down], "o", ms=9, color="C2", label="all down, intact")
+    a1.set_xlabel("seed")
+    a1.set_ylabel("time from the start [s]")
+    a1.set_xticks(seeds)
+    sep = [r for r in recs if r.get("first_separation")]
+    if sep:
+        a2.bar([r["seed"] for r in sep], [r["first_separation"]["max_barb_rad"] for r in sep], color="C0",
+               label="largest barb angle of that pair")
+        a2.axhline(sep[0]["first_separation"]["snap_rad"], color="C3", ls="--", label="snap angle")
+        a2.set_ylim(0.0, 1.35 * max(r["first_separation"]["max_barb_rad"] for r in sep))
+    a2.set_xlabel("seed")
+    a2.set_ylabel("barb angle from rest [rad]")
+    a2.set_xticks(seeds)
+    _finish(fig, (a1, a2), path)
 
 
 # -------------------------------------------------------------------- page
