@@ -4,7 +4,8 @@ import os
 
 import pytest
 
-from puzzlebot_bringup.scenario_trials import format_table, request_of, run_trial, scenario_steps, summarize
+from puzzlebot_bringup.scenario_trials import (format_table, plot_trials, request_of, run_trial, scenario_steps,
+                                               summarize)
 from puzzlebot_common.errors import ConfigError
 
 SCENARIOS = os.path.join(os.path.dirname(__file__), "..", "config", "scenarios")
@@ -38,3 +39,15 @@ def test_summary_counts_steps_reached_and_passed():
     assert (s["trials"], s["successes"], s["failed_trials"]) == (2, 1, [1])
     assert [(x["reached"], x["succeeded"]) for x in s["steps"]] == [(2, 2), (2, 1), (1, 1)]
     assert "| couple all robots into line | 2 | 2 | 10.0 | 10.0 |" in format_table(s)
+
+
+def test_timeline_plot_is_written(tmp_path):
+    steps = scenario_steps(SCENARIOS, "couple4_line")
+    ok = {"behavior": "x", "state": "succeeded", "ok": True, "sim_seconds": 10.0, "problems": []}
+    bad = dict(ok, ok=False, problems=["pz1-pz2 not seated"])
+    timeout = dict(ok, ok=False, state="failed")
+    records = [{"trial": k, "success": k == 0, "steps": s}
+               for k, s in enumerate([[ok, ok, ok], [ok, bad], [timeout]])]
+    path = str(tmp_path / "t.png")
+    plot_trials(records, steps, path, "couple4_line, seed 1")
+    assert os.path.getsize(path) > 5000

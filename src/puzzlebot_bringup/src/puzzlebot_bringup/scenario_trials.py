@@ -127,3 +127,45 @@ def format_table(summary):
                                                      "-" if s["median_s"] is None else "%.1f" % s["median_s"],
                                                      "-" if s["max_s"] is None else "%.1f" % s["max_s"]))
     return "\n".join(rows)
+
+
+def plot_trials(records, scenario_steps, path, title=""):
+    """PNG timeline: one row per trial, one bar per step it reached (length: simulated seconds), green
+    when the step succeeded and Bullet agreed, red when it did not, with the reason next to it (the
+    first problem Bullet found, or the behaviour's message)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    records = sorted(records, key=lambda r: r["trial"])
+    fig, ax = plt.subplots(figsize=(12, 1.2 + 0.22 * len(records)))
+    hatches = ["", "//", "..", "xx", "\\\\"]
+    t_max = 1.0
+    for row, rec in enumerate(records):
+        t = 0.0
+        for k, st in enumerate(rec["steps"]):
+            ax.barh(row, st["sim_seconds"], left=t, height=0.7, color="C2" if st["ok"] else "C3",
+                    hatch=hatches[k % len(hatches)], edgecolor="white", linewidth=0.5)
+            t += st["sim_seconds"]
+            if not st["ok"]:
+                why = st["problems"][0] if st["problems"] else st.get("message", st["state"])[:60]
+                ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3")
+        t_max = max(t_max, t)
+    handles = [Patch(facecolor="0.6", hatch=hatches[k % len(hatches)], edgecolor="white",
+                     label="%d. %s" % (k + 1, step.describe())) for k, step in enumerate(scenario_steps)]
+    handles += [Patch(color="C2", label="succeeded, checked in Bullet"), Patch(color="C3", label="failed")]
+    ok = sum(r["success"] for r in records)
+    ax.set_title("%s: %d of %d trials succeeded" % (title, ok, len(records)), fontsize=10)
+    ax.set_yticks(range(len(records)))
+    ax.set_yticklabels([str(r["trial"]) for r in records], fontsize=7)
+    ax.set_ylim(len(records) - 0.5, -0.5)
+    ax.set_xlim(0.0, 1.45 * t_max)
+    ax.set_ylabel("trial")
+    ax.set_xlabel("simulated time from the first step [s]")
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.6 / (1.2 + 0.22 * len(records))),
+              ncol=min(3, len(handles)))
+    ax.grid(alpha=0.3, axis="x")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
