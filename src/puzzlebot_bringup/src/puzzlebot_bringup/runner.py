@@ -59,7 +59,6 @@ class Runner:
 
     def __init__(self, robots):
         self.lock = threading.Lock()
-        self.status = None
         self.poses = {}         # robot -> (x, y, z, yaw) from its vicon topic
         self.pairs = None       # latest /puzzlebot/connection_pairs
         self.physical = None    # latest /puzzlebot/sim/physical_pairs
@@ -81,7 +80,6 @@ class Runner:
 
     # ------------------------------------------------------------ callbacks
     def _on_status(self, msg):
-        self.status = msg
         stamp = msg.header.stamp.to_sec()
         with self.lock:
             if msg.state != BehaviorStatus.IDLE:
@@ -217,10 +215,8 @@ class Runner:
     def pose_at(self, name, stamp):
         """(x, y, z, yaw) of ``name`` from its vicon topic at ``stamp`` (the first at or after it, else
         the latest); None without any."""
-        with self.lock:
-            history = list(self.pose_log.get(name, ()))
-        after = [pose for t, pose in history if t >= stamp - 1e-6]
-        return after[0] if after else (history[-1][1] if history else None)
+        pose = _first_at(self.pose_log.get(name, ()), stamp, self.lock)
+        return pose if pose is not None else self.poses.get(name)
 
 
 def _first_at(log, stamp, lock):

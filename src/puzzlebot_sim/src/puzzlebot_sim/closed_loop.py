@@ -177,7 +177,7 @@ class ClosedLoop:
     def physical(self):
         """{(anchor robot, opening robot) or (knob robot, hole robot): status} read off the Bullet bodies."""
         return {(p.anchor_robot, p.opening_robot): p.status
-                for p in self.world.physical_pairs() + self.world.physical_knob_pairs()}
+                for p in self.world.all_physical_pairs()}
 
 
 def make_world(cfg, starts, seed, mocap=None, world="flat"):

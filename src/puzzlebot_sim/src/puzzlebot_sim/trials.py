@@ -245,7 +245,7 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
             w.run(CONTROL_DT)
             for i in range(n - 1):
                 barb[i] = max(barb[i], *w.anchor_joints(names[i])[1:])
-                pulled[i] = max(pulled[i], w._anchor_home_x - _anchor_x_in_holder(w, names[i]))
+                pulled[i] = max(pulled[i], w.anchor_pullout(names[i]))
             now = {i for i in range(n - 1) if _status(w, names[i], names[i + 1]) == DECOUPLED}
             if now and first is None:
                 i = min(now)
@@ -263,11 +263,6 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
                 "pairs_ever_decoupled": len(decoupled),
                 "time_s": round(w.time - t0, 2) if all(down) else None, "first_separation": first}
 
-
-def _anchor_x_in_holder(w, name):
-    """x of ``name``'s anchor base in the robot's frame [m] (3-D: valid while the robot is tilted)."""
-    inv = pb.invertTransform(*w.pose(name))
-    return pb.multiplyTransforms(*inv, w.anchor_pose(name)[0], [0, 0, 0, 1])[0][0]
 
 
 def speed_test(robots, sim_seconds, seed=0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams(),
