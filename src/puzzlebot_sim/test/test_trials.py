@@ -1,6 +1,7 @@
 """Reduced versions of the acceptance experiments (scripts/anchor_trials runs the full ones)."""
 
 import json
+from dataclasses import replace
 import subprocess
 import sys
 import os
@@ -8,6 +9,7 @@ import os
 import pytest
 
 from puzzlebot_sim import trials as T
+from puzzlebot_sim.params import RobotParams
 
 SCRIPTS = os.path.join(os.path.dirname(__file__), "..", "scripts")
 
@@ -24,6 +26,15 @@ def test_driving_straight_away_does_not_pull_the_anchor_out(driver):
     r = T.pullout_trial(0, driver=driver, duration=3.0)
     assert r["success"], r
     assert 0.3 < r["max_flare_rad"] < r["snap_rad"]        # the barbs carry the pull, short of snapping
+
+
+def test_dc_motor_line_keeps_the_anchor_in_at_the_hardware_speed():
+    # ideal speed control at 0.2 m/s pulls the anchor out (docs/sim.md: 0 of 20 for the anchor robot); with the
+    # DC motor's torque-speed line the robot arrives with little torque left and stalls against the barbs
+    dc = replace(RobotParams(), wheel_no_load_speed=RobotParams().wheel_max_speed)
+    assert not T.pullout_trial(0, driver="anchor", speed=0.2, duration=2.0)["success"]
+    r = T.pullout_trial(0, driver="anchor", speed=0.2, duration=2.0, robot=dc)
+    assert r["success"] and r["max_flare_rad"] < r["snap_rad"], r
 
 
 def test_wiggle_releases_the_anchor():

@@ -13,7 +13,7 @@ from puzzlebot_sim.coupling import HEAD_INSERTED
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.scenario_starts import starts_from_config
 from puzzlebot_sim.urdf import URDF_MARGIN, anchor_urdf, body_parts, robot_urdf
-from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld
+from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld, motor_torque_limits
 
 
 def test_urdf_is_well_formed_with_wheels_and_casters():
@@ -94,6 +94,32 @@ def test_robot_pushes_with_about_half_a_newton():
         w.run(1.0)
         force = sum(cp[9] for cp in pb.getContactPoints(w.robots["pz1"]["body"], wall, physicsClientId=c))
         assert 0.42 < force <= 0.52
+
+
+def test_motor_torque_limits_follow_the_dc_motor_line():
+    # driving further in the direction of rotation: stall torque at rest, falling linearly with the speed
+    # (half at half the no-load speed, a fifth at 80 %); slowing down, reversing: the stall torque
+    lim = motor_torque_limits([20.0, 20.0, 20.0, -20.0, 0.0, -5.0, 5.0], [0.0, 10.0, 16.0, -10.0, 10.0, 10.0, 10.0],
+                              0.0025, 20.0)
+    assert lim == pytest.approx([0.0025, 0.00125, 0.0005, 0.00125, 0.0025, 0.0025, 0.0025])
+
+
+def test_dc_motor_line_slows_the_robot_near_v_max_and_keeps_the_stall_push():
+    robot = replace(RobotParams(), wheel_no_load_speed=20.0)
+    with SimWorld(robot, [RobotStart("pz1", 0, 0, 0)]) as w:
+        w.set_command("pz1", 0.2, 0.0)
+        w.run(1.0)
+        x0, t0 = w.pose2d("pz1")[0], w.time
+        w.run(0.5)
+        speed = (w.pose2d("pz1")[0] - x0) / (w.time - t0)
+        assert 0.15 < speed < 0.2                   # approaches the no-load speed, never quite there
+        w.set_command("pz1", 0.05, 0.0)
+        w.run(0.5)                                  # braking has the full torque: down to the command
+        x0, t0 = w.pose2d("pz1")[0], w.time
+        w.run(0.5)
+        assert (w.pose2d("pz1")[0] - x0) / (w.time - t0) == pytest.approx(0.05, rel=0.01)
+    with pytest.raises(ConfigError, match="wheel_no_load_speed"):
+        replace(RobotParams(), wheel_no_load_speed=10.0).check()
 
 
 def test_deterministic_for_same_commands_and_seed():

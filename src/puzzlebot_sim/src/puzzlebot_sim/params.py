@@ -49,6 +49,10 @@ class RobotParams:
     wheel_friction: float = 1.0      # -, lateral friction coefficient with the floor
     wheel_max_torque: float = 0.0025  # N m per wheel (0.5 N total push at 10 mm radius)
     wheel_max_speed: float = 20.0    # rad/s (0.2 m/s rim speed, the hardware v_max)
+    wheel_no_load_speed: float = 0.0  # rad/s, DC-motor torque-speed line (docs/sim.md): driving a wheel in its
+    #                                   direction of rotation, the torque available falls linearly from
+    #                                   wheel_max_torque at stall to 0 at this speed (braking: wheel_max_torque);
+    #                                   0 = off, ideal speed control up to wheel_max_torque at any speed
     pilot_wheel_x: float = 0.013     # m, pilot robots' wheel pairs at x = +/-pilot_wheel_x
     # ball casters (non-pilot robots), frictionless
     caster_radius: float = 0.005     # m
@@ -90,7 +94,7 @@ class RobotParams:
     def check(self, where="robot"):
         names = [f.name for f in fields(self)]
         nonneg = ["ground_clearance", "body_friction", "wheel_friction", "caster_x", "caster_clearance",
-                  "pilot_wheel_x"]
+                  "pilot_wheel_x", "wheel_no_load_speed"]
         require_positive(self, [n for n in names if n not in nonneg and n != "opening_z"], where)
         _require_nonnegative(self, nonneg, where)
         h, half_h = self.body_side / 2.0, self.body_height / 2.0
@@ -116,6 +120,10 @@ class RobotParams:
             raise ConfigError("%s: holder_depth/holder_wall do not fit the body" % where)
         if self.caster_radius * 2 > self.body_side / 2 + self.ground_clearance:
             raise ConfigError("%s.caster_radius: too large for the body" % where)
+        if 0.0 < self.wheel_no_load_speed < self.wheel_max_speed:
+            raise ConfigError("%s.wheel_no_load_speed (%g rad/s): below wheel_max_speed (%g rad/s), the wheels "
+                              "could never reach their speed limit (0 turns the torque-speed line off)"
+                              % (where, self.wheel_no_load_speed, self.wheel_max_speed))
         if self.wheel_radius < self.ground_clearance:
             raise ConfigError("%s: wheel_radius must exceed ground_clearance" % where)
         if self.knob_radius * 2 > self.hole_width or self.knob_radius > self.hole_depth + 1e-9 \
