@@ -220,6 +220,6 @@ class Runner:
 
 
 def _first_at(log, stamp, lock):
+    """The first message of ``log`` [(stamp, msg)] stamped at or after ``stamp``; None if none."""
     with lock:
-        after = [msg for t, msg in log if t >= stamp - 1e-6]
-    return after[0] if after else None
+        return next((msg for t, msg in log if t >= stamp - 1e-6), None)
