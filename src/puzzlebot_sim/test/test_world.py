@@ -13,7 +13,7 @@ from puzzlebot_sim.coupling import HEAD_INSERTED
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.scenario_starts import starts_from_config
 from puzzlebot_sim.urdf import URDF_MARGIN, anchor_urdf, body_parts, robot_urdf
-from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld, motor_torque_limits
+from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld
 
 
 def test_urdf_is_well_formed_with_wheels_and_casters():
@@ -70,12 +70,14 @@ def test_knob_in_a_neighbours_hole_is_a_physical_knob_pair():
         assert not [q for q in w.physical_pairs() if q.knob]                  # anchor pairs stay separate
 
 
-@pytest.mark.parametrize("v", [0.05, 0.2])
-def test_commanded_speed_is_driven_within_one_percent(v):
+@pytest.mark.parametrize("v, dc_motor", [(0.05, True), (0.05, False), (0.2, False)])
+def test_commanded_speed_is_driven_within_one_percent(v, dc_motor):
     # The wheels' collision spheres have the exact 10 mm radius and carry the weight (casters just
-    # off the floor): no rolling-radius error, no slip.
+    # off the floor): no rolling-radius error, no slip. At 0.2 m/s (the no-load speed) only ideal
+    # speed control gets there; the DC-motor line is tested below.
+    robot = RobotParams() if dc_motor else replace(RobotParams(), wheel_no_load_speed=0.0)
     for pilot in (False, True):
-        with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0, pilot)]) as w:
+        with SimWorld(robot, [RobotStart("pz1", 0, 0, 0, pilot)]) as w:
             w.set_command("pz1", v, 0.0)
             w.run(0.5)
             x0, t0 = w.pose2d("pz1")[0], w.time
@@ -84,28 +86,25 @@ def test_commanded_speed_is_driven_within_one_percent(v):
             assert speed == pytest.approx(v, rel=0.01), (pilot, speed)
 
 
-def test_robot_pushes_with_about_half_a_newton():
+@pytest.mark.parametrize("v", [0.05, 0.2])
+def test_robot_pushes_with_about_half_a_newton(v):
+    # stalled against a wall the wheels creep (the wall's reaction pitches the robot and unloads them);
+    # the DC-motor line leaves them 85 % of the stall torque at that creep: 0.42 N (ideal motors 0.47 N)
     with SimWorld(RobotParams(), [RobotStart("pz1", 0, 0, 0)]) as w:
         c = w.client
         wall = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[0.01, 0.1, 0.05],
                                                              physicsClientId=c), -1, [0.04, 0, 0.05],
                                   physicsClientId=c)
-        w.set_command("pz1", 0.05, 0.0)
+        w.set_command("pz1", v, 0.0)
         w.run(1.0)
         force = sum(cp[9] for cp in pb.getContactPoints(w.robots["pz1"]["body"], wall, physicsClientId=c))
-        assert 0.42 < force <= 0.52
+        assert 0.40 < force <= 0.52
 
 
-def test_motor_torque_limits_follow_the_dc_motor_line():
-    # driving further in the direction of rotation: stall torque at rest, falling linearly with the speed
-    # (half at half the no-load speed, a fifth at 80 %); slowing down, reversing: the stall torque
-    lim = motor_torque_limits([20.0, 20.0, 20.0, -20.0, 0.0, -5.0, 5.0], [0.0, 10.0, 16.0, -10.0, 10.0, 10.0, 10.0],
-                              0.0025, 20.0)
-    assert lim == pytest.approx([0.0025, 0.00125, 0.0005, 0.00125, 0.0025, 0.0025, 0.0025])
-
-
-def test_dc_motor_line_slows_the_robot_near_v_max_and_keeps_the_stall_push():
-    robot = replace(RobotParams(), wheel_no_load_speed=20.0)
+def test_dc_motor_line_slows_the_robot_near_v_max():
+    robot = RobotParams()
+    assert robot.wheel_back_emf_damping == pytest.approx(robot.wheel_max_torque / robot.wheel_no_load_speed)
+    assert replace(robot, wheel_no_load_speed=0.0).wheel_back_emf_damping == 0.0
     with SimWorld(robot, [RobotStart("pz1", 0, 0, 0)]) as w:
         w.set_command("pz1", 0.2, 0.0)
         w.run(1.0)

@@ -49,9 +49,9 @@ class RobotParams:
     wheel_friction: float = 1.0      # -, lateral friction coefficient with the floor
     wheel_max_torque: float = 0.0025  # N m per wheel (0.5 N total push at 10 mm radius)
     wheel_max_speed: float = 20.0    # rad/s (0.2 m/s rim speed, the hardware v_max)
-    wheel_no_load_speed: float = 0.0  # rad/s, DC-motor torque-speed line (docs/sim.md): driving a wheel in its
-    #                                   direction of rotation, the torque available falls linearly from
-    #                                   wheel_max_torque at stall to 0 at this speed (braking: wheel_max_torque);
+    wheel_no_load_speed: float = 20.0  # rad/s, DC-motor torque-speed line (docs/sim.md): the torque driving a
+    #                                   wheel falls linearly from wheel_max_torque at stall to 0 at this speed
+    #                                   (back-EMF, modelled as axle damping wheel_max_torque / this speed);
     #                                   0 = off, ideal speed control up to wheel_max_torque at any speed
     pilot_wheel_x: float = 0.013     # m, pilot robots' wheel pairs at x = +/-pilot_wheel_x
     # ball casters (non-pilot robots), frictionless
@@ -141,6 +141,16 @@ class RobotParams:
     def v_max(self):
         """Rim speed at the wheel speed limit [m/s] (the hardware v_max)."""
         return self.wheel_max_speed * self.wheel_radius
+
+    @property
+    def wheel_back_emf_damping(self):
+        """Axle damping [N m s/rad] that gives the DC-motor line (0 when the line is off).
+
+        With the velocity motor saturated at ``wheel_max_torque`` the net
+        drive torque is ``wheel_max_torque * (1 - speed / wheel_no_load_speed)``;
+        braking gets the stall torque plus the damping, as a DC motor does.
+        """
+        return self.wheel_max_torque / self.wheel_no_load_speed if self.wheel_no_load_speed > 0.0 else 0.0
 
     @property
     def push_force(self):

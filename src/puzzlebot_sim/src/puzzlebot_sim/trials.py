@@ -20,7 +20,7 @@ import pybullet as pb
 
 from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
-from puzzlebot_sim.world import RobotStart, SimWorld
+from puzzlebot_sim.world import GRAVITY, RobotStart, SimWorld
 
 #: Control period of the scripted drivers [s] (the MPC's rate).
 CONTROL_DT = 0.05
@@ -189,6 +189,61 @@ def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip",
                 "front_pitch_rad": round(_pitch(w, "a"), 2), "front_beyond_edge_mm": round(1e3 * (xa - wp.edge_x), 1),
                 "front_z_mm": round(1e3 * za, 1), "back_x_mm": round(1e3 * (xo - wp.edge_x), 1),
                 "head_locked": _head_locked(w, "a", "o", robot, anchor), "status": _status(w, "a", "o")}
+
+
+def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max_load_n=6.0, sim=SimParams(),
+                    robot=RobotParams(), anchor=AnchorParams()):
+    """How much load the edge lock holds (the paper's "holds up to 500 g").
+
+    The edge-lock start (:func:`edge_lock_trial`, ``stop="tip"``) on a stage
+    ``stage_height`` high: once the front robot ``a`` has tipped over the edge
+    and the pair stopped, the back robot ``o`` is clamped to the world (the
+    rig's table) and, after ``settle_s``, a downward force on ``a``'s centre
+    of mass grows at ``ramp_n_per_s`` (weights added to the hanging robot)
+    until the pair decouples or the force reaches ``max_load_n``.
+
+    Reports the extra load held at the separation (``held_n``, and as a mass
+    in g, ``held_g``, plus the robot's own mass in ``total_g``) and whether the
+    head was in the lock slot when the ramp started. Seeded perturbation: the
+    mated start. ``success``: the lock held the load that pair separated at
+    or ``max_load_n``; it is a measurement, compare ``total_g`` with 500 g.
+    """
+    rng = np.random.default_rng(seed)
+    wp = WorldParams(stage_height=stage_height)
+    starts = [replace(s, x=s.x - 0.03) for s in _mated_pair(rng, robot)]
+    starts[1] = replace(starts[1], pilot=True)
+    with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
+        c, body = w.client, w.robots["a"]["body"]
+        w.run(0.2)
+        for n in ("a", "o"):
+            w.set_command(n, 0.05, 0.0)
+        t0 = w.time
+        while _pitch(w, "a") < 0.15 and w.time - t0 < 10.0:
+            w.run(CONTROL_DT)
+        for n in ("a", "o"):
+            w.set_command(n, 0.0, 0.0)
+        position, orientation = w.pose("o")
+        pb.createConstraint(w.robots["o"]["body"], -1, -1, -1, pb.JOINT_FIXED, [0, 0, 0], [0, 0, 0], position,
+                            [0, 0, 0, 1], orientation, physicsClientId=c)
+        w.run(settle_s)
+        locked = _head_locked(w, "a", "o", robot, anchor)
+        load, held = 0.0, None
+        mass = sum(pb.getDynamicsInfo(body, link, physicsClientId=c)[0]
+                   for link in range(-1, pb.getNumJoints(body, physicsClientId=c)))
+        while _status(w, "a", "o") != DECOUPLED:
+            held = load
+            if load >= max_load_n:
+                break
+            load = min(max_load_n, load + ramp_n_per_s * CONTROL_DT)
+            for _ in range(int(round(CONTROL_DT / w.dt))):
+                pb.applyExternalForce(body, -1, [0.0, 0.0, -load], w.pose("a")[0], pb.WORLD_FRAME,
+                                      physicsClientId=c)
+                w.step()
+        held = held or 0.0
+        return {"trial": "lock_load", "seed": seed, "success": held >= max_load_n, "head_locked_at_start": locked,
+                "held_n": round(held, 3), "held_g": round(1e3 * held / GRAVITY, 1),
+                "total_g": round(1e3 * (held / GRAVITY + mass), 1),
+                "front_pitch_rad": round(_pitch(w, "a"), 2), "time_s": None}
 
 
 def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, direction="backward", pilot=None,

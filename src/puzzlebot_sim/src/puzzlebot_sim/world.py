@@ -116,24 +116,6 @@ def mated(anchor_pose, opening_pose, body_side):
             and abs(wrap_angle(opening_pose[2] - anchor_pose[2])) <= MATE_YAW_TOLERANCE)
 
 
-def motor_torque_limits(targets, speeds, max_torque, no_load_speed):
-    """Torque limits [N m] for the wheels' velocity motors, a DC motor's torque-speed line.
-
-    ``targets`` and ``speeds`` are the wheels' commanded and current angular
-    speeds [rad/s]. A wheel driven further in its direction of rotation gets
-    ``max_torque * (1 - |speed| / no_load_speed)`` (stall torque at rest,
-    nothing at the no-load speed); a wheel being slowed, reversed or at rest
-    gets ``max_torque`` (a DC motor brakes with at least its stall torque).
-    """
-    limits = []
-    for target, speed in zip(targets, speeds):
-        if (target - speed) * speed > 0.0:
-            limits.append(max_torque * max(0.0, 1.0 - abs(speed) / no_load_speed))
-        else:
-            limits.append(max_torque)
-    return limits
-
-
 def check_start_poses(starts, body_side, anchor_reach=0.0, anchor_half_width=0.0):
     """Raise ConfigError if robots (or an anchor and a robot) would start inside each other.
 
@@ -311,7 +293,8 @@ class SimWorld(BulletSession):
         pb.changeDynamics(body, -1, lateralFriction=p.body_friction, physicsClientId=c)
         self._set_group(body, -1, GROUP_BODY)
         for j in wheels:
-            pb.changeDynamics(body, j, lateralFriction=p.wheel_friction, physicsClientId=c)
+            pb.changeDynamics(body, j, lateralFriction=p.wheel_friction, jointDamping=p.wheel_back_emf_damping,
+                              physicsClientId=c)
             self._set_group(body, j, GROUP_WHEEL)
         for name in CASTER_LINKS:
             if name in links:
@@ -398,31 +381,26 @@ class SimWorld(BulletSession):
         c, p, t = self.client, self.params, self.time
         k = self.wheel_imbalance
         w_max, radius, torque = p.wheel_max_speed, p.wheel_radius, p.wheel_max_torque
-        dc_motor = p.wheel_no_load_speed > 0.0
         for name, robot in self.robots.items():
             plant = self._plants[name]
             if plant is not None:
                 v, w = plant.advance(t, self.dt)
             else:
                 v, w = self._cmd[name]
-                if robot["wheel_targets"] is not None and self._driven[name] == (v, w) and not dc_motor:
+                if robot["wheel_targets"] is not None and self._driven[name] == (v, w):
                     continue                              # same command: the motors keep their setting
             self._driven[name] = (v, w)
             vl, vr = wheel_speeds(v, w, p.wheel_base)
             wl = max(-w_max, min(w_max, (1.0 - k) * vl / radius))
             wr = max(-w_max, min(w_max, (1.0 + k) * vr / radius))
-            if (wl, wr) == robot["wheel_targets"] and not dc_motor:
+            if (wl, wr) == robot["wheel_targets"]:
                 continue                                  # Bullet keeps motor settings between steps
             robot["wheel_targets"] = (wl, wr)
             n_left = robot["n_left"]
             targets = [wl] * n_left + [wr] * (len(robot["wheels"]) - n_left)
-            if dc_motor:
-                speeds = [s[1] for s in pb.getJointStates(robot["body"], robot["wheels"], physicsClientId=c)]
-                forces = motor_torque_limits(targets, speeds, torque, p.wheel_no_load_speed)
-            else:
-                forces = [torque] * len(targets)
             pb.setJointMotorControlArray(robot["body"], robot["wheels"], pb.VELOCITY_CONTROL,
-                                         targetVelocities=targets, forces=forces, physicsClientId=c)
+                                         targetVelocities=targets, forces=[torque] * len(targets),
+                                         physicsClientId=c)
         if self.anchor_params is not None:
             self._apply_anchor_torques()
         if self._rest is not None:
