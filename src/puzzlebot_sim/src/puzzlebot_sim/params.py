@@ -49,7 +49,7 @@ class RobotParams:
     wheel_friction: float = 1.0      # -, lateral friction coefficient with the floor
     wheel_max_torque: float = 0.0025  # N m per wheel (0.5 N total push at 10 mm radius)
     wheel_max_speed: float = 20.0    # rad/s (0.2 m/s rim speed, the hardware v_max)
-    wheel_no_load_speed: float = 20.0  # rad/s, DC-motor torque-speed line (docs/sim.md): the torque driving a
+    wheel_no_load_speed: float = 0.0  # rad/s, DC-motor torque-speed line (docs/sim.md): the torque driving a
     #                                   wheel falls linearly from wheel_max_torque at stall to 0 at this speed
     #                                   (back-EMF, modelled as axle damping wheel_max_torque / this speed);
     #                                   0 = off, ideal speed control up to wheel_max_torque at any speed
