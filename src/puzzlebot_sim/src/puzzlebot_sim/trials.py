@@ -205,8 +205,8 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
     Reports the extra load held at the separation (``held_n``, and as a mass
     in g, ``held_g``, plus the robot's own mass in ``total_g``) and whether the
     head was in the lock slot when the ramp started. Seeded perturbation: the
-    mated start. ``success``: the lock held the load that pair separated at
-    or ``max_load_n``; it is a measurement, compare ``total_g`` with 500 g.
+    mated start. ``success``: the lock still held at ``max_load_n``. It is a
+    measurement: compare ``total_g`` with the hardware's 500 g.
     """
     rng = np.random.default_rng(seed)
     wp = WorldParams(stage_height=stage_height)
