@@ -32,6 +32,8 @@ EDGE_STOP = 0.004
 CHAIN_START_GAP = 0.005
 #: ... plus, backing off, the free anchor sticking out of its back [m].
 ANCHOR_OUT = 0.018
+#: A robot counts as tipped over a stage edge beyond this pitch [rad] (edge lock, lock load).
+EDGE_TIP_ANGLE = 0.15
 #: A robot counts as upright on the floor within these tolerances [m, rad].
 UPRIGHT_HEIGHT_TOLERANCE = 0.01
 UPRIGHT_TILT = 0.3
@@ -146,7 +148,14 @@ def _head_locked(w, anchor_robot, opening_robot, robot, anchor):
     return head[2] + anchor.head_height / 2 > robot.opening_z + robot.mouth_height / 2
 
 
-def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip", tip_angle=0.15,
+def _edge_pair(rng, robot, holder_pilot=True):
+    """The mated pair 30 mm back from the origin (the step world's edge ahead), ``o`` a pilot or not."""
+    starts = [replace(s, x=s.x - 0.03) for s in _mated_pair(rng, robot)]
+    starts[1] = replace(starts[1], pilot=holder_pilot)
+    return starts
+
+
+def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip", tip_angle=EDGE_TIP_ANGLE,
                     holder_pilot=True, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
     """A coupled pair on a stage drives forward until the front (anchor) robot ``a``
     goes over the edge; the back robot ``o`` holds it.
@@ -165,9 +174,7 @@ def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip",
     """
     rng = np.random.default_rng(seed)
     wp = WorldParams(stage_height=stage_height)
-    starts = [replace(s, x=s.x - 0.03) for s in _mated_pair(rng, robot)]
-    starts[1] = replace(starts[1], pilot=holder_pilot)
-    with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
+    with _world(_edge_pair(rng, robot, holder_pilot), sim, robot, anchor, world="step", world_params=wp) as w:
         w.run(0.2)
         for n in ("a", "o"):
             w.set_command(n, speed, 0.0)
@@ -191,8 +198,8 @@ def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip",
                 "head_locked": _head_locked(w, "a", "o", robot, anchor), "status": _status(w, "a", "o")}
 
 
-def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max_load_n=6.0, sim=SimParams(),
-                    robot=RobotParams(), anchor=AnchorParams()):
+def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max_load_n=6.0, tip_timeout=10.0,
+                    sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
     """How much load the edge lock holds (the paper's "holds up to 500 g").
 
     The edge-lock start (:func:`edge_lock_trial`, ``stop="tip"``) on a stage
@@ -200,7 +207,8 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
     and the pair stopped, the back robot ``o`` is clamped to the world (the
     rig's table) and, after ``settle_s``, a downward force on ``a``'s centre
     of mass grows at ``ramp_n_per_s`` (weights added to the hanging robot)
-    until the pair decouples or the force reaches ``max_load_n``.
+    until the pair decouples or the force reaches ``max_load_n``. (If ``a``
+    has not tipped after ``tip_timeout`` s the load starts anyway.)
 
     Reports the extra load held at the separation (``held_n``, and as a mass
     in g, ``held_g``, plus the robot's own mass in ``total_g``) and whether the
@@ -210,15 +218,13 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
     """
     rng = np.random.default_rng(seed)
     wp = WorldParams(stage_height=stage_height)
-    starts = [replace(s, x=s.x - 0.03) for s in _mated_pair(rng, robot)]
-    starts[1] = replace(starts[1], pilot=True)
-    with _world(starts, sim, robot, anchor, world="step", world_params=wp) as w:
+    with _world(_edge_pair(rng, robot), sim, robot, anchor, world="step", world_params=wp) as w:
         c, body = w.client, w.robots["a"]["body"]
         w.run(0.2)
         for n in ("a", "o"):
             w.set_command(n, 0.05, 0.0)
         t0 = w.time
-        while _pitch(w, "a") < 0.15 and w.time - t0 < 10.0:
+        while _pitch(w, "a") < EDGE_TIP_ANGLE and w.time - t0 < tip_timeout:
             w.run(CONTROL_DT)
         for n in ("a", "o"):
             w.set_command(n, 0.0, 0.0)

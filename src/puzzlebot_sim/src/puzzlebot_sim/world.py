@@ -393,14 +393,13 @@ class SimWorld(BulletSession):
             vl, vr = wheel_speeds(v, w, p.wheel_base)
             wl = max(-w_max, min(w_max, (1.0 - k) * vl / radius))
             wr = max(-w_max, min(w_max, (1.0 + k) * vr / radius))
-            if (wl, wr) == robot["wheel_targets"]:
-                continue                                  # Bullet keeps motor settings between steps
-            robot["wheel_targets"] = (wl, wr)
-            n_left = robot["n_left"]
-            targets = [wl] * n_left + [wr] * (len(robot["wheels"]) - n_left)
-            pb.setJointMotorControlArray(robot["body"], robot["wheels"], pb.VELOCITY_CONTROL,
-                                         targetVelocities=targets, forces=[torque] * len(targets),
-                                         physicsClientId=c)
+            if (wl, wr) != robot["wheel_targets"]:        # Bullet keeps motor settings between steps
+                robot["wheel_targets"] = (wl, wr)
+                n_left = robot["n_left"]
+                targets = [wl] * n_left + [wr] * (len(robot["wheels"]) - n_left)
+                pb.setJointMotorControlArray(robot["body"], robot["wheels"], pb.VELOCITY_CONTROL,
+                                             targetVelocities=targets, forces=[torque] * len(targets),
+                                             physicsClientId=c)
         if self.anchor_params is not None:
             self._apply_anchor_torques()
         if self._rest is not None:
