@@ -74,6 +74,24 @@ def test_speed_test_and_scripts_report_json(tmp_path):
     assert bad.returncode == 2 and "no such file" in bad.stderr and "Traceback" not in bad.stderr
 
 
+def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors():
+    def pullout(*extra):
+        out = subprocess.run([sys.executable, os.path.join(SCRIPTS, "anchor_trials"), "pullout", "--trials", "1",
+                              "--speed", "0.2", "--driver", "anchor", "--json", *extra],
+                             capture_output=True, text=True)
+        return out
+    # at the hardware's 0.2 m/s the ideal motors pull the anchor out; the DC-motor line set by
+    # --robot (no-load speed = v_max) keeps it in (docs/sim.md)
+    assert json.loads(pullout().stdout.splitlines()[0])["success"] is False
+    assert json.loads(pullout("--robot", "wheel_no_load_speed=20").stdout.splitlines()[0])["success"] is True
+    for extra, message in ((("--robot", "nope=1"), "unknown key(s) nope"),
+                           (("--robot", "pilot_wheel_x=abc"), "--robot.pilot_wheel_x"),
+                           (("--anchor", "neck_max_torque"), "expects KEY=VALUE"),
+                           (("--anchor", "base_radius=0.02"), "anchor")):
+        bad = pullout(*extra)
+        assert bad.returncode == 2 and message in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
+
+
 def test_chain_trial_reports_how_a_pair_came_apart():
     # the chain down the step (docs/sim.md: 1/10, not achieved): whatever the outcome, a separation is
     # reported with the pair and the anchor's state, and the anchor never leaves its holder (base travel
