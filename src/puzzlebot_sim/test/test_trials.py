@@ -1,10 +1,10 @@
 """Reduced versions of the acceptance experiments (scripts/anchor_trials runs the full ones)."""
 
 import json
-from dataclasses import replace
+import os
 import subprocess
 import sys
-import os
+from dataclasses import replace
 
 import pytest
 
@@ -76,10 +76,9 @@ def test_speed_test_and_scripts_report_json(tmp_path):
 
 def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors():
     def pullout(*extra):
-        out = subprocess.run([sys.executable, os.path.join(SCRIPTS, "anchor_trials"), "pullout", "--trials", "1",
-                              "--speed", "0.2", "--driver", "anchor", "--json", *extra],
-                             capture_output=True, text=True)
-        return out
+        return subprocess.run([sys.executable, os.path.join(SCRIPTS, "anchor_trials"), "pullout", "--trials", "1",
+                               "--speed", "0.2", "--driver", "anchor", "--json", *extra],
+                              capture_output=True, text=True)
     # at the hardware's 0.2 m/s the ideal motors pull the anchor out; the DC-motor line set by
     # --robot (no-load speed = v_max) keeps it in (docs/sim.md)
     assert json.loads(pullout().stdout.splitlines()[0])["success"] is False

@@ -6,6 +6,7 @@ fills one from a mapping, checking names and types, so a typo in a YAML file
 is a clear error instead of a silently ignored key.
 """
 
+import json
 import math
 from dataclasses import fields, replace
 
@@ -60,6 +61,24 @@ def from_mapping(cls, data, where):
     if check is not None:
         check(where)
     return obj
+
+
+def key_values(items, option):
+    """{key: value} from command-line ``KEY=VALUE`` strings (``option`` names the flag in errors).
+
+    A value is parsed as JSON when it can be (numbers, lists, true/false),
+    else kept as a string; the caller checks keys and types (from_mapping).
+    """
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("%s expects KEY=VALUE, got %r" % (option, item))
+        try:
+            out[key.strip()] = json.loads(value)
+        except ValueError:
+            out[key.strip()] = value
+    return out
 
 
 def require_positive(obj, names, where):

@@ -48,7 +48,7 @@ import numpy as np
 
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
-from puzzlebot_common.params import from_mapping, require_positive
+from puzzlebot_common.params import from_mapping, key_values, require_positive
 from puzzlebot_mpc.behaviors import FAILED, RUNNING, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_mpc.config_files import config_path as mpc_config_path
 from puzzlebot_mpc import pairs as pr
@@ -575,16 +575,8 @@ def main(experiment, argv=None):
             return _fail(prog, "--seed must be an integer or 'fresh' (got %r)" % args.seed)
         if seed < 0:
             return _fail(prog, "--seed must be >= 0 (got %d)" % seed)
-    overrides = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep:
-            return _fail(prog, "--set expects KEY=VALUE, got %r" % item)
-        try:
-            overrides[key.strip()] = json.loads(value)
-        except ValueError:
-            overrides[key.strip()] = value
     try:
+        overrides = key_values(args.set, "--set")
         load_experiment_params()
         tasks = tasks_for(experiment, args.trials, seed, (offset,))
         label = "%s %s mm" % (experiment, ("%g" % offset)) if experiment == COUPLE else experiment
