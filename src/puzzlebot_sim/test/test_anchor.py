@@ -13,7 +13,7 @@ def tmap(a=AnchorParams(), p=RobotParams()):
     return BarbTorqueMap(a, p.mouth_width, p.lip_depth / 2)
 
 
-def test_torque_law_is_asymmetric_and_snaps_at_the_end_of_the_profile():
+def test_torque_law_is_asymmetric_and_snaps_through_at_the_end_of_the_profile():
     a, m = AnchorParams(), tmap()
     assert m.torque_at(0.0) == pytest.approx(a.barb_min_torque, rel=0.1)       # at rest: only the floor
     # backward (flare): torque = F(d)/2 * b sin(phi); e.g. at d = 4 mm the anchor carries 0.6 N
@@ -21,9 +21,15 @@ def test_torque_law_is_asymmetric_and_snaps_at_the_end_of_the_profile():
     tau = m.torque_at(phi - a.barb_angle)
     assert tau == pytest.approx(0.5 * 0.60 * a.barb_length * math.sin(phi), rel=0.02)
     assert m.backward_displacement(phi - a.barb_angle) == pytest.approx(0.004)
-    # past the profile's end (5 mm) the beam snaps through
+    # past the profile's end (5 mm) the beam snaps through and keeps barb_post_snap_ratio of its torque
     assert m.snap_mm == pytest.approx(5.0, abs=0.05)
-    assert m.torque_at(m.snap_angle - a.barb_angle + 0.01) == a.barb_min_torque
+    q_end = m.snap_angle - a.barb_angle
+    assert 0.0 < a.barb_post_snap_ratio < 1.0
+    for q in (q_end + 0.01, a.barb_flip_limit - a.barb_angle):
+        assert m.torque_at(q) == pytest.approx(a.barb_post_snap_ratio * m.torque_at(q_end), rel=0.01)
+        assert m.max_torque(q) == pytest.approx(m.torque_at(q))
+    # ratio 0: the rig's snap-through, down to the floor
+    assert tmap(replace(a, barb_post_snap_ratio=0.0)).torque_at(q_end + 0.01) == a.barb_min_torque
     # forward (fold) torque is bounded by the forward profile through the contact geometry; the
     # tips pass the lips after the profile's 5 mm
     assert m.forward_pass_mm > 5.0

@@ -23,8 +23,9 @@ def test_simulated_rig_reproduces_the_paper_figures(tmp_path):
 
 def test_rig_measures_the_simulation_not_the_table():
     # Same table, barbs that snap through earlier (shorter): the measured backward curve ends
-    # where the geometry says, not where the table does.
-    a = replace(AnchorParams(), barb_length=0.0055, length=0.0228)
+    # where the geometry says, not where the table does (the snapped barbs' remaining torque zeroed
+    # so that the snap shows as a drop).
+    a = replace(AnchorParams(), barb_length=0.0055, length=0.0228, barb_post_snap_ratio=0.0)
     with ForceRig(RobotParams(), a) as rig:
         back = rig.push("backward")
         snap_mm = rig.map.snap_mm

@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 
 from puzzlebot_sim import trials as T
-from puzzlebot_sim.params import RobotParams
+from puzzlebot_sim.params import AnchorParams
 
 SCRIPTS = os.path.join(os.path.dirname(__file__), "..", "scripts")
 
@@ -28,13 +28,14 @@ def test_driving_straight_away_does_not_pull_the_anchor_out(driver):
     assert 0.3 < r["max_flare_rad"] < r["snap_rad"]        # the barbs carry the pull, short of snapping
 
 
-def test_dc_motor_line_keeps_the_anchor_in_at_the_hardware_speed():
-    # ideal speed control at 0.2 m/s pulls the anchor out (docs/sim.md: 0 of 20 for the anchor robot); with the
-    # DC motor's torque-speed line the robot arrives with little torque left and stalls against the barbs
-    dc = replace(RobotParams(), wheel_no_load_speed=RobotParams().wheel_max_speed)
-    assert not T.pullout_trial(0, driver="anchor", speed=0.2, duration=2.0)["success"]
-    r = T.pullout_trial(0, driver="anchor", speed=0.2, duration=2.0, robot=dc)
-    assert r["success"] and r["max_flare_rad"] < r["snap_rad"], r
+def test_driving_away_at_the_hardware_speed_does_not_pull_the_anchor_out():
+    # at 0.2 m/s the robot meets the barbs with momentum and flares them past the end of the profile; the
+    # snapped beams' remaining torque (barb_post_snap_ratio, docs/sim.md) keeps the anchor in. Without it
+    # (the rig's snap-through to nothing) the same pull comes out
+    r = T.pullout_trial(0, driver="anchor", speed=0.2, duration=2.0)
+    assert r["success"], r
+    snapped = replace(AnchorParams(), barb_post_snap_ratio=0.0)
+    assert not T.pullout_trial(0, driver="anchor", speed=0.2, duration=2.0, anchor=snapped)["success"]
 
 
 def test_wiggle_releases_the_anchor():
@@ -79,10 +80,10 @@ def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors()
         return subprocess.run([sys.executable, os.path.join(SCRIPTS, "anchor_trials"), "pullout", "--trials", "1",
                                "--speed", "0.2", "--driver", "anchor", "--json", *extra],
                               capture_output=True, text=True)
-    # at the hardware's 0.2 m/s the ideal motors pull the anchor out; the DC-motor line set by
-    # --robot (no-load speed = v_max) keeps it in (docs/sim.md)
-    assert json.loads(pullout().stdout.splitlines()[0])["success"] is False
-    assert json.loads(pullout("--robot", "wheel_no_load_speed=20").stdout.splitlines()[0])["success"] is True
+    # at the hardware's 0.2 m/s the anchor stays in; with --anchor barb_post_snap_ratio=0 (the barbs snap
+    # through to nothing, docs/sim.md) it comes out
+    assert json.loads(pullout().stdout.splitlines()[0])["success"] is True
+    assert json.loads(pullout("--anchor", "barb_post_snap_ratio=0").stdout.splitlines()[0])["success"] is False
     for extra, message in ((("--robot", "nope=1"), "unknown key(s) nope"),
                            (("--robot", "pilot_wheel_x=abc"), "--robot.pilot_wheel_x"),
                            (("--anchor", "neck_max_torque"), "expects KEY=VALUE"),

@@ -12,8 +12,12 @@ load exceeds what the real beam would carry at that displacement:
   the barbs fold (phi < phi_0) -- forward profile;
 * pulled back (the lips' inner faces press on the barb tips): the barbs flare
   (phi > phi_0) -- backward profile. Past the end of the backward profile
-  (about perpendicular, 5 mm) the beam snaps through: the torque drops to the
-  floor and the barb flips forward, which is how an anchor comes out.
+  (about perpendicular, 5 mm) the beam snaps through: the torque drops to
+  ``barb_post_snap_ratio`` times its value there (never below the floor) and
+  stays there while the barb flips forward, which is how an anchor comes out.
+  The ratio is not measured: the rig's force drop near 4.7 mm is the probe
+  slipping off the tips, which the slits prevent on the robot (facts.md), so
+  the beam keeps a share of its load (docs/sim.md, "Anchor model").
 
 Mapping from beam force to joint torque. The profile F(d) is the force on
 the whole anchor (both barbs) against the probe displacement d, measured with
@@ -132,8 +136,9 @@ class BarbTorqueMap:
 
         floor = a.barb_min_torque
         q_snap = q_b[-1] + 1e-4
+        self.post_snap_torque = max(a.barb_post_snap_ratio * float(tau_b[-1]), floor)
         self.q = np.concatenate([q_f, q_b[1:], [q_snap]])
-        self.tau = np.maximum(np.concatenate([tau_f, tau_b[1:], [floor]]), floor)
+        self.tau = np.maximum(np.concatenate([tau_f, tau_b[1:], [self.post_snap_torque]]), floor)
         self.rest_lateral = float(hy + b * math.sin(phi0))
         self._q_list = [float(v) for v in self.q]
         self._tau_list = [float(v) for v in self.tau]   # tip centre's distance from the bar axis
@@ -144,7 +149,7 @@ class BarbTorqueMap:
         if q <= qs[0]:
             return self._tau_list[0]
         if q >= qs[-1]:
-            return self.a.barb_min_torque
+            return self.post_snap_torque
         i = bisect.bisect_right(qs, q)
         q0, q1 = qs[i - 1], qs[i]
         t0, t1 = self._tau_list[i - 1], self._tau_list[i]
@@ -152,7 +157,7 @@ class BarbTorqueMap:
 
     def max_torque(self, q):
         """Torque limit [N m] at joint angle(s) q = phi - phi_0 [rad] (scalar or array)."""
-        return np.interp(q, self.q, self.tau, left=self.tau[0], right=self.a.barb_min_torque)
+        return np.interp(q, self.q, self.tau, left=self.tau[0], right=self.post_snap_torque)
 
     def backward_displacement(self, q):
         """Probe displacement [m] of the backward push at joint angle q >= 0 (rig geometry)."""

@@ -202,6 +202,8 @@ class AnchorParams:
     barb_flip_limit: float = 3.1     # rad, largest barb angle (flipped forward, pulled out)
     barb_servo_rate: float = 20.0    # 1/s, velocity servo gain pulling a barb back to rest
     barb_min_torque: float = 2.0e-5  # N m, restoring torque floor (returns the barb to rest)
+    barb_post_snap_ratio: float = 0.5  # -, share of its torque at the profile's end a barb keeps past it
+    #                                    (snapped through, flipping forward); 0 = drop to barb_min_torque
     neck_max_torque: float = 0.01    # N m, pitch stiffness limit of the neck (TPU bending)
     neck_servo_rate: float = 20.0    # 1/s
     neck_limit: float = 1.5          # rad, +/- neck bending range
@@ -221,7 +223,8 @@ class AnchorParams:
         for name in ("forward_profile_mm", "forward_profile_n", "backward_profile_mm", "backward_profile_n"):
             object.__setattr__(self, name, _profile(getattr(self, name), where, name))
         scalar = [f.name for f in fields(self) if not f.name.endswith(("_mm", "_n"))]
-        nonneg = ("friction", "barb_friction", "head_friction", "barb_min_torque", "hinge_back")
+        nonneg = ("friction", "barb_friction", "head_friction", "barb_min_torque", "hinge_back",
+                  "barb_post_snap_ratio")
         _require_nonnegative(self, nonneg, where)
         require_positive(self, [n for n in scalar if n not in nonneg], where)
         for kind in ("forward", "backward"):
@@ -233,6 +236,9 @@ class AnchorParams:
                 raise ConfigError("%s.%s_profile_mm: must start at 0 and increase" % (where, kind))
             if any(v < 0 for v in n):
                 raise ConfigError("%s.%s_profile_n: forces must be >= 0" % (where, kind))
+        if self.barb_post_snap_ratio > 1.0:
+            raise ConfigError("%s.barb_post_snap_ratio (%g): a snapped beam carries at most its peak torque (<= 1)"
+                              % (where, self.barb_post_snap_ratio))
         if not self.barb_fold_limit < self.barb_angle < math.pi / 2 < self.barb_flip_limit <= math.pi:
             raise ConfigError("%s: need barb_fold_limit < barb_angle < pi/2 < barb_flip_limit <= pi" % where)
         if self.neck_x + self.bar_width > self.length - self.head_width:
