@@ -32,3 +32,15 @@ def test_rig_measures_the_simulation_not_the_table():
     assert snap_mm < 4.8
     k = int(round(snap_mm / 0.1))
     assert max(back[:k]) > 0.5 and max(back[k + 2:]) < 0.1
+
+
+def test_snapped_barbs_still_hold_a_straight_pull():
+    # past the profile's 5 mm the barbs snap through but keep barb_post_snap_ratio of their torque (docs/sim.md):
+    # a straight pull meets a second peak above a robot's 0.5 N push before the tips pass the lips; with the
+    # ratio at 0 (the rig's slippage taken for the robot) nothing resists after the snap
+    def after_snap(ratio):
+        with ForceRig(RobotParams(), replace(AnchorParams(), barb_post_snap_ratio=ratio)) as rig:
+            back = rig.push("backward", max_mm=8.0, step_mm=0.25)
+        return max(back[22:])                                  # beyond 5.5 mm
+    assert after_snap(AnchorParams().barb_post_snap_ratio) > 0.7
+    assert after_snap(0.0) < 0.05

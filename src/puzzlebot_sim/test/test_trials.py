@@ -93,7 +93,7 @@ def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors()
 
 
 def test_chain_trial_reports_how_a_pair_came_apart():
-    # the chain down the step (docs/sim.md: 1/10, not achieved): whatever the outcome, a separation is
+    # the chain down the step (docs/sim.md: 10/20, not achieved): whatever the outcome, a separation is
     # reported with the pair and the anchor's state, and the anchor never leaves its holder (base travel
     # at most the holder's stop plus contact compliance)
     r = T.chain_step_trial(3)

@@ -202,8 +202,8 @@ class AnchorParams:
     barb_flip_limit: float = 3.1     # rad, largest barb angle (flipped forward, pulled out)
     barb_servo_rate: float = 20.0    # 1/s, velocity servo gain pulling a barb back to rest
     barb_min_torque: float = 2.0e-5  # N m, restoring torque floor (returns the barb to rest)
-    barb_post_snap_ratio: float = 0.5  # -, share of its torque at the profile's end a barb keeps past it
-    #                                    (snapped through, flipping forward); 0 = drop to barb_min_torque
+    barb_post_snap_ratio: float = 0.45  # -, share of its torque at the profile's end a barb keeps past it
+    #                                     (snapped through, flipping forward); 0 = drop to barb_min_torque
     neck_max_torque: float = 0.01    # N m, pitch stiffness limit of the neck (TPU bending)
     neck_servo_rate: float = 20.0    # 1/s
     neck_limit: float = 1.5          # rad, +/- neck bending range
