@@ -4,6 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
 from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify, classify_knob
 from puzzlebot_sim.params import AnchorParams, RobotParams
@@ -30,6 +31,9 @@ def test_torque_law_is_asymmetric_and_snaps_through_at_the_end_of_the_profile():
         assert m.max_torque(q) == pytest.approx(m.torque_at(q))
     # ratio 0: the rig's snap-through, down to the floor
     assert tmap(replace(a, barb_post_snap_ratio=0.0)).torque_at(q_end + 0.01) == a.barb_min_torque
+    for bad in (-0.1, 1.5):                                   # a share of the peak: 0..1
+        with pytest.raises(ConfigError, match="barb_post_snap_ratio"):
+            AnchorParams.from_dict({"barb_post_snap_ratio": bad})
     # forward (fold) torque is bounded by the forward profile through the contact geometry; the
     # tips pass the lips after the profile's 5 mm
     assert m.forward_pass_mm > 5.0
