@@ -47,6 +47,7 @@ from puzzlebot_bringup.runner import SETTLE, Runner
 from puzzlebot_bringup.scenario import parse_scenario
 
 INSERTED = ConnectionPair.STATUS_HEAD_INSERTED
+ALIGNED = ConnectionPair.STATUS_HEAD_ALIGNED
 WALL_LIMIT = 600.0   # s (wall), only so that a hung graph cannot hang the test
 DRIVE_TOLERANCE = 0.002  # m: the MPC stops at the distance on its own noisy poses, the test measures on its copy
 ANCHOR_YAW_MAX = 1.0     # rad: an anchor turned further in its holder has flipped round (holder play +/-0.5)
@@ -59,15 +60,11 @@ def anchor_key(p):
     return (p.robot_i, p.robot_j)
 
 
-def coupled(msg, robots=None):
-    """Pairs (keys) with status head_inserted in a ConnectionPairArray, among ``robots`` if given."""
+def coupled(msg, robots=None, least=INSERTED):
+    """Pairs (keys) with status ``least`` or better (default head_inserted) in a ConnectionPairArray,
+    among ``robots`` if given; ``least=ALIGNED``: the head at least in the opening."""
     return {anchor_key(p): p for p in (msg.pairs if msg else [])
-            if p.status == INSERTED and (robots is None or (p.robot_i in robots and p.robot_j in robots))}
-
-
-def in_opening(msg):
-    """Pairs (keys) with the head at least in the opening (head_aligned or head_inserted)."""
-    return {anchor_key(p): p for p in (msg.pairs if msg else []) if p.status >= ConnectionPair.STATUS_HEAD_ALIGNED}
+            if p.status >= least and (robots is None or (p.robot_i in robots and p.robot_j in robots))}
 
 
 class ScenarioTest(unittest.TestCase):
@@ -135,8 +132,8 @@ class ScenarioTest(unittest.TestCase):
             self.assertGreater(len(phys_log), 5 * (t1 - t0), "too few physical pairs messages during the drive")
             unseated = [(m.header.stamp.to_sec(), sorted(set(anchors) - set(coupled(m)))) for m in phys_log
                         if set(anchors) - set(coupled(m))]
-            apart = [(m.header.stamp.to_sec(), sorted(set(anchors) - set(in_opening(m)))) for m in phys_log
-                     if set(anchors) - set(in_opening(m))]
+            apart = [(m.header.stamp.to_sec(), sorted(set(anchors) - set(coupled(m, least=ALIGNED))))
+                     for m in phys_log if set(anchors) - set(coupled(m, least=ALIGNED))]
             self.log("drive: %d physical pair message(s), %d with a pair not seated, %d with a pair apart"
                      % (len(phys_log), len(unseated), len(apart)))
             self.assertFalse(apart, "anchor out of its opening in Bullet during the drive (t, pairs): %s"
