@@ -92,6 +92,26 @@ def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors()
         assert bad.returncode == 2 and message in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
 
 
+def test_anchor_trials_runs_every_variant_on_the_same_seeds(tmp_path):
+    # the same 0.2 m/s pull in two models: the default keeps the anchor in, barbs that snap to nothing
+    # let it out; each result line names its variant, and a table closes the run
+    variants = tmp_path / "variants.yaml"
+    variants.write_text("variants:\n  default: {}\n  snap_to_nothing: {anchor: {barb_post_snap_ratio: 0.0}}\n")
+    cmd = [sys.executable, os.path.join(SCRIPTS, "anchor_trials"), "pullout", "--trials", "1", "--speed", "0.2",
+           "--driver", "anchor", "--variants", str(variants)]
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert lines[0].startswith("variant=default ") and "success=True" in lines[0]
+    assert lines[1].startswith("variant=snap_to_nothing ") and "success=False" in lines[1]
+    assert lines[-3].split()[:2] == ["default", "1/1"] and lines[-2].split()[:2] == ["snap_to_nothing", "0/1"]
+    assert lines[-1].split() == ["all", "1/2"]
+    variants.write_text("variants:\n  a: {robot: {ground_clearance: -1}}\n")
+    bad = subprocess.run(cmd, capture_output=True, text=True)
+    assert bad.returncode == 2 and "variants.a.robot.ground_clearance" in bad.stderr, bad.stderr
+    assert "Traceback" not in bad.stderr
+
+
 def test_chain_trial_reports_how_a_pair_came_apart():
     # the chain down the step (docs/sim.md: 10/20, not achieved): whatever the outcome, a separation is
     # reported with the pair and the anchor's state, and the anchor never leaves its holder (base travel

@@ -41,6 +41,34 @@ def test_body_has_no_part_thinner_than_bullets_margin():
         robot_urdf(replace(p, knob_radius=0.0005))
 
 
+def test_chamfered_edges_are_what_bullet_collides_with():
+    # 4 mm chamfers on the bottom edges, 12 mm on the top ones: a ray aimed at each corner of the
+    # body (y = 10 mm, clear of the opening and holder) hits the 45-degree chamfer plane, not the corner
+    p = replace(RobotParams(), bottom_chamfer=0.004, top_chamfer=0.012)
+    h, hz = p.body_side / 2, p.body_height / 2
+    for lo, hi in body_parts(p)["shell"]:                 # the corners are carved from the block
+        for c, zs in ((p.bottom_chamfer, -1), (p.top_chamfer, 1)):
+            corner_z = (hz - c) if zs > 0 else (-hz + c)
+            in_z = lo[2] >= corner_z - 1e-9 if zs > 0 else hi[2] <= corner_z + 1e-9
+            assert not (in_z and (hi[0] > h - c + 1e-9 or lo[0] < -h + c - 1e-9))
+    with SimWorld(p, [RobotStart("pz1", 0, 0, 0)]) as w:
+        w.run(0.2)
+        centre = w.pose("pz1")[0]
+        for sx in (1, -1):
+            for c, sz in ((p.bottom_chamfer, -1), (p.top_chamfer, 1)):
+                start = [centre[0] + sx * (h + 0.01), 0.01, centre[2] + sz * (hz + 0.01)]
+                end = [centre[0], 0.01, centre[2]]
+                hit = pb.rayTest(start, end, physicsClientId=w.client)[0]
+                x, z = hit[3][0] - centre[0], hit[3][2] - centre[2]
+                assert sx * x + sz * z == pytest.approx(h + hz - c, abs=0.0012)   # on the plane (margin 1 mm)
+    with pytest.raises(ConfigError, match="bottom_chamfer: 1.0 mm is below"):
+        RobotParams.from_dict({"bottom_chamfer": 0.001})
+    with pytest.raises(ConfigError, match="bottom_chamfer: 9.0 mm would cut into the front opening"):
+        RobotParams.from_dict({"bottom_chamfer": 0.009})
+    with pytest.raises(ConfigError, match="top_chamfer: 21.0 mm would cut .* \\(must be below 20.0 mm"):
+        RobotParams.from_dict({"top_chamfer": 0.021})
+
+
 def drive(world, seconds):
     world.run(seconds)
 

@@ -40,6 +40,10 @@ class RobotParams:
     body_mass: float = 0.068         # kg (whole robot incl. wheels' share)
     ground_clearance: float = 0.003  # m, body bottom above the floor
     body_friction: float = 0.3       # -, body shell (PLA) against anything
+    bottom_chamfer: float = 0.0      # m, 45-degree chamfer along the front and back edges of the body's
+    #                                   bottom (0 = square edges; 0 or >= 2 mm, Bullet's margin)
+    top_chamfer: float = 0.0         # m, the same along the top front and back edges: how far two coupled
+    #                                   robots fold concave before their tops meet (docs/sim.md)
     # wheels (pilots: two pairs at x = +/-pilot_wheel_x)
     wheel_radius: float = 0.010      # m
     wheel_width: float = 0.003       # m
@@ -94,7 +98,7 @@ class RobotParams:
     def check(self, where="robot"):
         names = [f.name for f in fields(self)]
         nonneg = ["ground_clearance", "body_friction", "wheel_friction", "caster_x", "caster_clearance",
-                  "pilot_wheel_x", "wheel_no_load_speed"]
+                  "pilot_wheel_x", "wheel_no_load_speed", "bottom_chamfer", "top_chamfer"]
         require_positive(self, [n for n in names if n not in nonneg and n != "opening_z"], where)
         _require_nonnegative(self, nonneg, where)
         h, half_h = self.body_side / 2.0, self.body_height / 2.0
@@ -118,6 +122,7 @@ class RobotParams:
             raise ConfigError("%s: the holder slot must not be larger than the pocket" % where)
         if self.holder_wall >= self.holder_depth or self.holder_depth + self.cavity_depth >= self.body_side:
             raise ConfigError("%s: holder_depth/holder_wall do not fit the body" % where)
+        self._check_chamfers(where)
         if self.caster_radius * 2 > self.body_side / 2 + self.ground_clearance:
             raise ConfigError("%s.caster_radius: too large for the body" % where)
         if 0.0 < self.wheel_no_load_speed < self.wheel_max_speed:
@@ -131,6 +136,24 @@ class RobotParams:
             raise ConfigError("%s: the knob (r=%g, h=%g) must fit the hole (%g x %g x %g)"
                               % (where, self.knob_radius, self.knob_height, self.hole_width, self.hole_depth,
                                  self.hole_height))
+
+    def _check_chamfers(self, where):
+        """Chamfers are 0 or at least 2 mm (Bullet's margin) and leave the opening, lock slot, holder
+        and side connectors whole."""
+        half_h = self.body_height / 2.0
+        port = max(self.mouth_height, self.holder_height) / 2.0
+        sides = self.body_side / 2.0 - max(self.hole_width / 2.0, self.knob_radius)      # knob and hole at x = 0
+        room = {"bottom_chamfer": min(half_h + self.opening_z - port, sides),            # below mouth / holder
+                "top_chamfer": min(half_h - self.opening_z - max(self.mouth_height / 2.0 + self.lock_height, port),
+                                   sides)}
+        for name, limit in room.items():
+            c = getattr(self, name)
+            if 0.0 < c < 0.002 - 1e-12:
+                raise ConfigError("%s.%s: %.1f mm is below Bullet's 2 mm collision margin (use 0 for a "
+                                  "square edge)" % (where, name, 1e3 * c))
+            if c >= limit:
+                raise ConfigError("%s.%s: %.1f mm would cut into the front opening, the anchor holder or the "
+                                  "side connectors (must be below %.1f mm)" % (where, name, 1e3 * c, 1e3 * limit))
 
     @property
     def body_centre_height(self):

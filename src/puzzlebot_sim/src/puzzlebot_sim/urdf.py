@@ -4,7 +4,8 @@ Robot (``robot_urdf``): ``base_link`` at the body centre, x forward, z up; the
 body's bottom is ``ground_clearance`` above the floor. The body is a solid
 block with voids carved out of it -- the front opening (mouth between two
 lips, the slits behind them), the anchor holder's pocket and slot in the back
-face, the hole on the right side -- and decomposed into boxes. The battery box
+face, the hole on the right side, the corners of chamfered edges -- and
+decomposed into boxes; a chamfer's face is a tilted box. The battery box
 (behind the slits) and the knob on the left side are their own shapes. Two
 driven wheels (pilot robots: four) on continuous joints, two ball casters
 (non-pilots; frictionless, set by the world) on fixed joints. A wheel's
@@ -198,6 +199,9 @@ def body_parts(p):
         ((-p.hole_width / 2, -h, p.knob_z - p.hole_height / 2),
          (p.hole_width / 2, -h + p.hole_depth, p.knob_z + p.hole_height / 2)),               # side hole
     ]
+    for c, z0, z1 in ((p.bottom_chamfer, -hz, -hz + p.bottom_chamfer), (p.top_chamfer, hz - p.top_chamfer, hz)):
+        if c > 0.0:                                                                          # chamfered edges
+            voids += [((-h, -h, z0), (-h + c, h, z1)), ((h - c, -h, z0), (h, h, z1))]
     shell = carve(((-h, -h, -hz), (h, h, hz)), voids, 2 * URDF_MARGIN)
     r_e = p.lip_depth / 2.0
     lips = []
@@ -205,6 +209,26 @@ def body_parts(p):
         y0, y1 = sorted((sign * (p.mouth_width / 2 + r_e), sign * half_slit))
         lips.append(((h - p.lip_depth, y0, zo - mz), (h, y1, zo + mz)))
     return {"shell": shell, "lips": lips, "battery": battery}
+
+
+def chamfer_faces(p):
+    """Faces of the chamfered edges as boxes 2 mm thick, in base_link: [(centre, pitch, size)].
+
+    A 45-degree chamfer of size c on an edge of the body's bottom or top, at the
+    front and at the back; the box's outer face is the chamfer plane, the rest
+    lies inside the body (whose corner ``body_parts`` carves away).
+    """
+    h, hz, t = p.body_side / 2.0, p.body_height / 2.0, 2 * URDF_MARGIN
+    faces = []
+    for c, sz in ((p.bottom_chamfer, -1), (p.top_chamfer, 1)):
+        if c <= 0.0:
+            continue
+        for sx in (1, -1):
+            mid_x, mid_z = sx * (h - c / 2), sz * (hz - c / 2)          # the chamfer plane's midpoint
+            inward = t / 2 / math.sqrt(2.0)
+            faces.append(((mid_x - sx * inward, 0.0, mid_z - sz * inward), sz * sx * math.pi / 4,
+                          (c * math.sqrt(2.0), p.body_side, t)))
+    return faces
 
 
 def lip_edges(p):
@@ -223,6 +247,9 @@ def robot_urdf(p, name="puzzlebot", pilot=False):
     lo, hi = parts["battery"]
     body += _shape('<box size="%.6g %.6g %.6g"/>' % tuple(b - a for a, b in zip(lo, hi)),
                    tuple((a + b) / 2 for a, b in zip(lo, hi)), color="battery", collision=False)
+    for centre, pitch, size in chamfer_faces(p):
+        body += _shape('<box size="%.6g %.6g %.6g"/>' % size, centre, (0.0, pitch, 0.0), color="pilot" if pilot
+                       else "body")
     for x, y, r in lip_edges(p):
         body += _shape('<cylinder radius="%.6g" length="%.6g"/>' % (r, p.mouth_height), (x, y, p.opening_z),
                        color="lip")

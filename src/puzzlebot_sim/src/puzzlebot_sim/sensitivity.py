@@ -1,0 +1,81 @@
+"""Run one seeded trial across model variants: is a result robust to what is not measured?
+
+A variant is a name and overrides of RobotParams / AnchorParams fields (e.g. a
+ground clearance or a body friction the sources do not give). The variants
+come from a YAML file (config/variants.yaml)::
+
+    variants:
+      default: {}
+      clearance_5mm: {robot: {ground_clearance: 0.005}}
+
+Every variant runs the same trial on the same seeds; ``table`` prints one row
+per variant and a total. ROS-free; used by ``anchor_trials --variants``.
+"""
+
+from dataclasses import fields
+
+from puzzlebot_common.config import load_yaml
+from puzzlebot_common.errors import ConfigError
+from puzzlebot_sim.params import AnchorParams, RobotParams
+
+
+def load_variants(path, robot=RobotParams(), anchor=AnchorParams()):
+    """[(name, RobotParams, AnchorParams)] from a variants file, each on top of ``robot`` / ``anchor``.
+
+    Unknown keys, wrong types and parameter sets that fail their checks raise
+    ConfigError naming the file and the variant.
+    """
+    data = load_yaml(path)
+    variants = data.get("variants") if isinstance(data, dict) else None
+    if not isinstance(variants, dict) or not variants:
+        raise ConfigError("%s: expected a non-empty mapping 'variants: {name: {robot: {...}, anchor: {...}}}'"
+                          % path)
+    out = []
+    for name, spec in variants.items():
+        where = "%s: variants.%s" % (path, name)
+        spec = {} if spec is None else spec
+        if not isinstance(spec, dict) or set(spec) - {"robot", "anchor"}:
+            raise ConfigError("%s: expected a mapping with the keys robot and/or anchor, got %r" % (where, spec))
+        r = _override(robot, spec.get("robot"), where + ".robot")
+        a = _override(anchor, spec.get("anchor"), where + ".anchor")
+        a.check_fits(r, where=where)
+        out.append((str(name), r, a))
+    return out
+
+
+def _override(params, values, where):
+    """``params`` with the fields in ``values`` replaced (names, types and checks as for a YAML file)."""
+    values = {} if values is None else values
+    if not isinstance(values, dict):
+        raise ConfigError("%s: expected a mapping of field: value, got %r" % (where, values))
+    merged = {f.name: getattr(params, f.name) for f in fields(params)}
+    merged.update(values)
+    return type(params).from_dict(merged, where=where)
+
+
+def run_job(job):
+    """(variant name, result) of one job (variant name, trial function of the seed, seed); picklable."""
+    name, trial, seed = job
+    return name, trial(seed)
+
+
+def table(rows):
+    """Text table: one row per (variant name, [trial result dicts]) and a total.
+
+    Columns: successes / trials, failures with a pair that came apart
+    (``pairs_ever_decoupled``, chain trials), other failures, and the mean
+    time of the successes [s].
+    """
+    lines = ["%-24s %9s %10s %7s %8s" % ("variant", "success", "separated", "other", "mean_s")]
+    total_ok = total = 0
+    for name, results in rows:
+        ok = [r for r in results if r["success"]]
+        apart = [r for r in results if not r["success"] and r.get("pairs_ever_decoupled")]
+        times = [r["time_s"] for r in ok if r.get("time_s") is not None]
+        lines.append("%-24s %9s %10d %7d %8s" % (
+            name, "%d/%d" % (len(ok), len(results)), len(apart), len(results) - len(ok) - len(apart),
+            "%.2f" % (sum(times) / len(times)) if times else "-"))
+        total_ok += len(ok)
+        total += len(results)
+    lines.append("%-24s %9s" % ("all", "%d/%d" % (total_ok, total)))
+    return "\n".join(lines)
