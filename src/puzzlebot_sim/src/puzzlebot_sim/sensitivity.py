@@ -17,6 +17,7 @@ from dataclasses import fields
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.params import AnchorParams, RobotParams
+from puzzlebot_sim.trials import summarize
 
 
 def load_variants(path, robot=RobotParams(), anchor=AnchorParams()):
@@ -69,13 +70,12 @@ def table(rows):
     lines = ["%-24s %9s %10s %7s %8s" % ("variant", "success", "separated", "other", "mean_s")]
     total_ok = total = 0
     for name, results in rows:
-        ok = [r for r in results if r["success"]]
-        apart = [r for r in results if not r["success"] and r.get("pairs_ever_decoupled")]
-        times = [r["time_s"] for r in ok if r.get("time_s") is not None]
+        s = summarize(results)
+        apart = sum(1 for r in results if not r["success"] and r.get("pairs_ever_decoupled"))
         lines.append("%-24s %9s %10d %7d %8s" % (
-            name, "%d/%d" % (len(ok), len(results)), len(apart), len(results) - len(ok) - len(apart),
-            "%.2f" % (sum(times) / len(times)) if times else "-"))
-        total_ok += len(ok)
-        total += len(results)
+            name, "%d/%d" % (s["successes"], s["trials"]), apart, s["trials"] - s["successes"] - apart,
+            "-" if s["mean_time_s"] is None else "%.2f" % s["mean_time_s"]))
+        total_ok += s["successes"]
+        total += s["trials"]
     lines.append("%-24s %9s" % ("all", "%d/%d" % (total_ok, total)))
     return "\n".join(lines)

@@ -219,13 +219,13 @@ def chamfer_faces(p):
     lies inside the body (whose corner ``body_parts`` carves away).
     """
     h, hz, t = p.body_side / 2.0, p.body_height / 2.0, 2 * URDF_MARGIN
+    inward = t / 2 / math.sqrt(2.0)            # box centre behind the plane, along each axis
     faces = []
     for c, sz in ((p.bottom_chamfer, -1), (p.top_chamfer, 1)):
         if c <= 0.0:
             continue
         for sx in (1, -1):
             mid_x, mid_z = sx * (h - c / 2), sz * (hz - c / 2)          # the chamfer plane's midpoint
-            inward = t / 2 / math.sqrt(2.0)
             faces.append(((mid_x - sx * inward, 0.0, mid_z - sz * inward), sz * sx * math.pi / 4,
                           (c * math.sqrt(2.0), p.body_side, t)))
     return faces
