@@ -302,6 +302,35 @@ def _holder_yaw(pull, sign):
         return wrap_angle(w.anchor_pose2d("a")[2] - w.pose2d("a")[2])
 
 
+def _holder_pitch(anchor, up):
+    """Pitch [rad] of the anchor's base relative to its robot, pulled out against the holder's stop
+    (0.1 N) with 0.2 N up or down on its head tip; mean over the last second of 3 s."""
+    with SimWorld(RobotParams(), [RobotStart("a", 0, 0, 0)], anchor_params=anchor,
+                  anchor_rest=AnchorRestParams(enabled=False)) as w:
+        body, c, pitches = w.robots["a"]["anchor"], w.client, []
+        for k in range(600):
+            head = w.anchor_points("a")[0]
+            pb.applyExternalForce(body, 0, [-0.1, 0, 0.2 if up else -0.2], head, pb.WORLD_FRAME, physicsClientId=c)
+            w.step(1)
+            if k >= 400:
+                local = pb.multiplyTransforms(*pb.invertTransform(*w.pose("a")), *w.anchor_pose("a"))
+                pitches.append(pb.getEulerFromQuaternion(local[1])[1])
+        return sum(pitches) / len(pitches)
+
+
+def test_a_keel_holds_the_anchors_pitch_in_its_holder_to_the_papers_limit():
+    # without a keel the ball-and-collar base pitches about 0.2-0.26 rad when pulled out and loaded;
+    # a 7.5 mm keel, stopped by the pocket's floor and ceiling, keeps it near the paper's < 0.1 rad
+    free = [abs(_holder_pitch(AnchorParams(), up)) for up in (True, False)]
+    keel = [abs(_holder_pitch(replace(AnchorParams(), keel_height=0.0075), up)) for up in (True, False)]
+    assert min(free) > 0.18 and max(keel) < 0.12
+    assert anchor_urdf(replace(AnchorParams(), keel_height=0.0075)).count("<collision>") == \
+        anchor_urdf(AnchorParams()).count("<collision>") + 1
+    for bad in (0.001, 0.0082):
+        with pytest.raises(ConfigError, match="keel_height: 0 \\(no keel\\) or from 0.002 m"):
+            replace(AnchorParams(), keel_height=bad).check_fits(RobotParams())
+
+
 def test_anchor_yaws_in_its_holder_and_is_squared_up_when_pushed_in():
     free = [_holder_yaw(True, s) for s in (1, -1)]
     pushed = [_holder_yaw(False, s) for s in (1, -1)]

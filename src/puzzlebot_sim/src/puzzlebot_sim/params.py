@@ -23,6 +23,11 @@ from typing import Tuple
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.params import from_mapping, require_positive
 
+#: Width [m] of the anchor's keel (AnchorParams.keel_height): the thinnest box
+#: Bullet's 1 mm collision margin allows, rounded across its width, so it stops
+#: pitch without squaring the anchor's yaw up.
+KEEL_WIDTH = 0.002
+
 
 def _require_nonnegative(obj, names, where):
     for name in names:
@@ -205,6 +210,8 @@ class AnchorParams:
     base_radius: float = 0.004       # m, the base is a ball in the holder (free yaw, one contact) ...
     collar_width: float = 0.004      # m ... with a collar (box as long as the ball, this wide and high)
     collar_height: float = 0.002     # m     whose flat ends square the anchor up against the holder's walls
+    keel_height: float = 0.0         # m, a keel through the ball (as long as it, 2 mm wide, this high; 0 = none):
+    #                                  the pocket's floor and ceiling and the retaining wall stop its pitch
     base_mass: float = 0.0010        # kg
     length: float = 0.0243           # m, base centre to head tip
     neck_x: float = 0.0075           # m, base centre to the neck joint
@@ -247,7 +254,7 @@ class AnchorParams:
             object.__setattr__(self, name, _profile(getattr(self, name), where, name))
         scalar = [f.name for f in fields(self) if not f.name.endswith(("_mm", "_n"))]
         nonneg = ("friction", "barb_friction", "head_friction", "barb_min_torque", "hinge_back",
-                  "barb_post_snap_ratio")
+                  "barb_post_snap_ratio", "keel_height")
         _require_nonnegative(self, nonneg, where)
         require_positive(self, [n for n in scalar if n not in nonneg], where)
         for kind in ("forward", "backward"):
@@ -284,6 +291,9 @@ class AnchorParams:
                               "its slot" % (where, 1e3 * d))
         if self.collar_width >= robot.holder_width or self.collar_height >= d:
             raise ConfigError("%s: the collar must be narrower than the pocket and lower than the ball" % where)
+        if self.keel_height and not KEEL_WIDTH <= self.keel_height < robot.holder_height:
+            raise ConfigError("%s.keel_height: 0 (no keel) or from %g m up to below the holder pocket's height "
+                              "(%g m)" % (where, KEEL_WIDTH, robot.holder_height))
         if self.bar_width >= robot.holder_slot_width or self.bar_height >= robot.holder_slot_height:
             raise ConfigError("%s: the bar (%g x %g m) does not pass the holder slot" % (where, self.bar_width,
                                                                                    self.bar_height))
