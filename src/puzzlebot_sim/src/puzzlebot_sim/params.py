@@ -23,10 +23,11 @@ from typing import Tuple
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.params import from_mapping, require_positive
 
-#: Width [m] of the anchor's keel (AnchorParams.keel_height): the thinnest box
-#: Bullet's 1 mm collision margin allows, rounded across its width, so it stops
-#: pitch without squaring the anchor's yaw up.
-KEEL_WIDTH = 0.002
+#: Bullet's collision margin for URDF shapes [m]. A box half-extent or a
+#: cylinder radius below it is inflated to it in contacts, so every collision
+#: feature must be at least this large (``urdf.check_features``); the chamfer
+#: and keel checks below use it too.
+URDF_MARGIN = 0.001
 
 
 def _require_nonnegative(obj, names, where):
@@ -153,7 +154,7 @@ class RobotParams:
                                    sides)}
         for name, limit in room.items():
             c = getattr(self, name)
-            if 0.0 < c < 0.002 - 1e-12:
+            if 0.0 < c < 2 * URDF_MARGIN - 1e-12:
                 raise ConfigError("%s.%s: %.1f mm is below Bullet's 2 mm collision margin (use 0 for a "
                                   "square edge)" % (where, name, 1e3 * c))
             if c >= limit:
@@ -210,8 +211,9 @@ class AnchorParams:
     base_radius: float = 0.004       # m, the base is a ball in the holder (free yaw, one contact) ...
     collar_width: float = 0.004      # m ... with a collar (box as long as the ball, this wide and high)
     collar_height: float = 0.002     # m     whose flat ends square the anchor up against the holder's walls
-    keel_height: float = 0.0         # m, a keel through the ball (as long as it, 2 mm wide, this high; 0 = none):
-    #                                  the pocket's floor and ceiling and the retaining wall stop its pitch
+    keel_height: float = 0.0         # m, a keel through the ball (as long as it, this high; 0 = none), 2 mm wide
+    #                                  (2 x URDF_MARGIN: rounded across, so it stops pitch, not yaw): the pocket's
+    #                                  floor and ceiling and the retaining wall stop its pitch
     base_mass: float = 0.0010        # kg
     length: float = 0.0243           # m, base centre to head tip
     neck_x: float = 0.0075           # m, base centre to the neck joint
@@ -291,9 +293,9 @@ class AnchorParams:
                               "its slot" % (where, 1e3 * d))
         if self.collar_width >= robot.holder_width or self.collar_height >= d:
             raise ConfigError("%s: the collar must be narrower than the pocket and lower than the ball" % where)
-        if self.keel_height and not KEEL_WIDTH <= self.keel_height < robot.holder_height:
+        if self.keel_height and not 2 * URDF_MARGIN <= self.keel_height < robot.holder_height:
             raise ConfigError("%s.keel_height: 0 (no keel) or from %g m up to below the holder pocket's height "
-                              "(%g m)" % (where, KEEL_WIDTH, robot.holder_height))
+                              "(%g m)" % (where, 2 * URDF_MARGIN, robot.holder_height))
         if self.bar_width >= robot.holder_slot_width or self.bar_height >= robot.holder_slot_height:
             raise ConfigError("%s: the bar (%g x %g m) does not pass the holder slot" % (where, self.bar_width,
                                                                                    self.bar_height))

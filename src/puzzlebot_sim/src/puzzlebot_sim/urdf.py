@@ -28,12 +28,7 @@ import pybullet as pb
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.anchor import AnchorGeometry
-from puzzlebot_sim.params import KEEL_WIDTH
-
-#: Bullet's collision margin for URDF shapes [m]. A box half-extent or a
-#: cylinder radius below it is inflated to it in contacts, so every collision
-#: feature must be at least this large (``check_features``).
-URDF_MARGIN = 0.001
+from puzzlebot_sim.params import URDF_MARGIN
 
 #: Flags for pybullet.loadURDF of these URDFs: exact (implicit) cylinders and
 #: the inertias written here (PyBullet otherwise derives them from the shapes).
@@ -311,7 +306,7 @@ def anchor_urdf(a, name="anchor"):
     base += _shape('<box size="%.6g %.6g %.6g"/>' % (2 * a.base_radius, a.collar_width, a.collar_height),
                    color="anchor")
     if a.keel_height:
-        base += _shape('<box size="%.6g %.6g %.6g"/>' % (2 * a.base_radius, KEEL_WIDTH, a.keel_height),
+        base += _shape('<box size="%.6g %.6g %.6g"/>' % (2 * a.base_radius, 2 * URDF_MARGIN, a.keel_height),
                        color="anchor")
     stub_len = a.neck_x - a.base_radius / 2
     base += _shape('<box size="%.6g %.6g %.6g"/>' % (stub_len, bar_y, bar_z),
