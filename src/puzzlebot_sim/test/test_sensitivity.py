@@ -2,7 +2,7 @@ import pytest
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.params import AnchorParams, RobotParams
-from puzzlebot_sim.sensitivity import load_variants, run_job, table
+from puzzlebot_sim.sensitivity import load_model, load_variants, robot_file, run_job, table
 
 
 def write(tmp_path, text):
@@ -39,6 +39,24 @@ def test_bad_variants_files_are_clear_errors(tmp_path, text, message):
 def test_missing_variants_file_is_a_clear_error(tmp_path):
     with pytest.raises(ConfigError, match="no such file"):
         load_variants(str(tmp_path / "none.yaml"))
+
+
+def test_a_robot_file_sets_the_model_and_overrides_go_on_top(tmp_path):
+    path = write(tmp_path, "robot: {ground_clearance: 0.005, body_friction: 0.2}\nanchor: {keel_height: 0.0075}\n")
+    robot, anchor = load_model(path, robot={"body_friction": 0.4})
+    assert robot.ground_clearance == 0.005 and robot.body_friction == 0.4 and anchor.keel_height == 0.0075
+    assert robot.wheel_radius == RobotParams().wheel_radius                  # left out: the default
+    # the package's file is the model the sim node and the experiments load; today it is the defaults
+    assert load_model() == (RobotParams(), AnchorParams()) and robot_file().endswith("robot.yaml")
+    for text, message in (("robot: {clearance: 1}\n", r"robot: unknown key\(s\) clearance"),
+                          ("robots: {}\n", "expected a mapping with the keys robot and/or anchor"),
+                          ("anchor: {base_radius: 0.02}\n", "base_radius")):
+        with pytest.raises(ConfigError, match=message):
+            load_model(write(tmp_path, text))
+    with pytest.raises(ConfigError, match=r"--anchor: unknown key\(s\) nope"):
+        load_model(path, anchor={"nope": 1})
+    with pytest.raises(ConfigError, match="no such file"):
+        load_model(str(tmp_path / "none.yaml"))
 
 
 def test_the_package_variants_file_loads():

@@ -75,7 +75,7 @@ def test_speed_test_and_scripts_report_json(tmp_path):
     assert bad.returncode == 2 and "no such file" in bad.stderr and "Traceback" not in bad.stderr
 
 
-def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors():
+def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors(tmp_path):
     def pullout(*extra):
         return subprocess.run([sys.executable, os.path.join(SCRIPTS, "anchor_trials"), "pullout", "--trials", "1",
                                "--speed", "0.2", "--driver", "anchor", "--json", *extra],
@@ -84,10 +84,14 @@ def test_anchor_trials_overrides_reach_the_trial_and_bad_ones_are_clear_errors()
     # through to nothing, docs/sim.md) it comes out
     assert json.loads(pullout().stdout.splitlines()[0])["success"] is True
     assert json.loads(pullout("--anchor", "barb_post_snap_ratio=0").stdout.splitlines()[0])["success"] is False
+    robot_file = tmp_path / "robot.yaml"                   # the same model change from a robot file
+    robot_file.write_text("anchor: {barb_post_snap_ratio: 0.0}\n")
+    assert json.loads(pullout("--robot-file", str(robot_file)).stdout.splitlines()[0])["success"] is False
     for extra, message in ((("--robot", "nope=1"), "unknown key(s) nope"),
                            (("--robot", "pilot_wheel_x=abc"), "--robot.pilot_wheel_x"),
                            (("--anchor", "neck_max_torque"), "expects KEY=VALUE"),
-                           (("--anchor", "base_radius=0.02"), "anchor")):
+                           (("--anchor", "base_radius=0.02"), "anchor"),
+                           (("--robot-file", str(tmp_path / "none.yaml")), "no such file")):
         bad = pullout(*extra)
         assert bad.returncode == 2 and message in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
 

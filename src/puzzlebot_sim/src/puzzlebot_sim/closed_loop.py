@@ -27,6 +27,7 @@ from puzzlebot_mpc.config_files import load_target_file
 from puzzlebot_mpc.control_loop import ControlLoop
 from puzzlebot_mpc.settings import MPCSettings
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
+from puzzlebot_sim.sensitivity import load_model
 from puzzlebot_sim.world import SimWorld
 
 
@@ -60,8 +61,7 @@ def load_sim_config():
     """SimConfig from puzzlebot_sim/config/sim.yaml and robot.yaml."""
     sim_path, robot_path = sim_config_path("sim.yaml"), sim_config_path("robot.yaml")
     cfg = SimConfig(SimParams.from_dict(_section(sim_path, "sim"), where="%s: sim" % sim_path),
-                    RobotParams.from_dict(_section(robot_path, "robot"), where="%s: robot" % robot_path),
-                    AnchorParams.from_dict(_section(robot_path, "anchor"), where="%s: anchor" % robot_path),
+                    *load_model(robot_path),
                     WorldParams.from_dict(_section(sim_path, "world"), where="%s: world" % sim_path),
                     AnchorRestParams.from_dict(_section(sim_path, "anchor_rest"),
                                                where="%s: anchor_rest" % sim_path))

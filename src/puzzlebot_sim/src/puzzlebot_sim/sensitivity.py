@@ -10,14 +10,41 @@ come from a YAML file (config/variants.yaml)::
 
 Every variant runs the same trial on the same seeds; ``table`` prints one row
 per variant and a total. ROS-free; used by ``anchor_trials --variants``.
+
+``load_model`` reads the model every variant starts from: a robot file
+(default: the package's config/robot.yaml, the file the sim node and the
+experiments load) with command-line overrides on top.
 """
 
 from dataclasses import fields
 
-from puzzlebot_common.config import load_yaml
+from puzzlebot_common.config import load_yaml, package_path
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.params import AnchorParams, RobotParams
 from puzzlebot_sim.trials import summarize
+
+
+def robot_file():
+    """Path of the package's robot file, config/robot.yaml."""
+    return package_path("puzzlebot_sim", "config", "robot.yaml")
+
+
+def load_model(path=None, robot=None, anchor=None):
+    """(RobotParams, AnchorParams) of a robot file with overrides on top, checked.
+
+    ``path``: a YAML file with the keys ``robot`` and ``anchor`` (default:
+    ``robot_file()``); ``robot`` / ``anchor``: {field: value} overrides, e.g.
+    from ``--robot KEY=VALUE`` (errors name them ``--robot`` / ``--anchor``).
+    Fields the file leaves out keep the defaults of puzzlebot_sim/params.py.
+    """
+    path = path or robot_file()
+    data = load_yaml(path)
+    if not isinstance(data, dict) or set(data) - {"robot", "anchor"}:
+        raise ConfigError("%s: expected a mapping with the keys robot and/or anchor" % path)
+    r = _override(_override(RobotParams(), data.get("robot"), "%s: robot" % path), robot, "--robot")
+    a = _override(_override(AnchorParams(), data.get("anchor"), "%s: anchor" % path), anchor, "--anchor")
+    a.check_fits(r, where="%s with --anchor" % path)
+    return r, a
 
 
 def load_variants(path, robot=RobotParams(), anchor=AnchorParams()):
