@@ -20,6 +20,7 @@ from dataclasses import fields
 
 from puzzlebot_common.config import load_yaml, package_path
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.params import key_values
 from puzzlebot_sim.params import AnchorParams, RobotParams
 from puzzlebot_sim.trials import summarize
 
@@ -45,6 +46,21 @@ def load_model(path=None, robot=None, anchor=None):
     a = _override(_override(AnchorParams(), data.get("anchor"), "%s: anchor" % path), anchor, "--anchor")
     a.check_fits(r, where="%s with --anchor" % path)
     return r, a
+
+
+def add_model_options(parser):
+    """Add the options that choose the model to an argparse parser: --robot-file, --robot, --anchor."""
+    parser.add_argument("--robot-file", default=None, metavar="FILE",
+                        help="robot file with the keys robot and anchor (default: the package's config/robot.yaml)")
+    parser.add_argument("--robot", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a RobotParams field (repeatable), e.g. ground_clearance=0.005")
+    parser.add_argument("--anchor", action="append", default=[], metavar="KEY=VALUE",
+                        help="override an AnchorParams field (repeatable), e.g. keel_height=0.0075")
+
+
+def model_from_options(args):
+    """(RobotParams, AnchorParams) from the options of ``add_model_options``."""
+    return load_model(args.robot_file, key_values(args.robot, "--robot"), key_values(args.anchor, "--anchor"))
 
 
 def load_variants(path, robot=RobotParams(), anchor=AnchorParams()):
