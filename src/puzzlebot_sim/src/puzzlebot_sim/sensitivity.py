@@ -44,7 +44,7 @@ def load_model(path=None, robot=None, anchor=None):
         raise ConfigError("%s: expected a mapping with the keys robot and/or anchor" % path)
     r = _override(_override(RobotParams(), data.get("robot"), "%s: robot" % path), robot, "--robot")
     a = _override(_override(AnchorParams(), data.get("anchor"), "%s: anchor" % path), anchor, "--anchor")
-    a.check_fits(r, where="%s with --anchor" % path)
+    a.check_fits(r, where="--anchor" if anchor else "--robot" if robot else "%s: anchor" % path)
     return r, a
 
 
