@@ -23,6 +23,7 @@ from typing import Optional
 import pybullet as pb
 
 from puzzlebot_sim.coupling import HEAD_INSERTED
+from puzzlebot_sim.holder import anchor_in_robot
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams
 from puzzlebot_sim.trials import MATE_GAP
 from puzzlebot_sim.world import RobotStart, SimWorld
@@ -107,11 +108,8 @@ def measure_concave_fold(robot=RobotParams(), anchor=AnchorParams(), loads=FoldL
 
     def hold(w, t, lift):
         if t >= loads.ramp_time:
-            c = w.client
-            local = pb.multiplyTransforms(*pb.invertTransform(*w.pose("a"), physicsClientId=c),
-                                          *w.anchor_pose("a"), physicsClientId=c)
             held["fold"].append(_fold(w))
-            held["pitch"].append(_pitch(local))
+            held["pitch"].append(anchor_in_robot(w, "a")[4])
             held["coupled"] = _coupled(w)
         return False
 

@@ -97,16 +97,16 @@ class HolderPlay:
         return d
 
 
-def _relative_pose(world):
-    """Anchor base in the robot's base_link: (x, y, z) [m], (roll, pitch, yaw) [rad]."""
+def anchor_in_robot(world, name="a"):
+    """Robot ``name``'s anchor base in its base_link: (x, y, z) [m], (roll, pitch, yaw) [rad]."""
     c = world.client
-    position, orientation = pb.multiplyTransforms(*pb.invertTransform(*world.pose("a"), physicsClientId=c),
-                                                  *world.anchor_pose("a"), physicsClientId=c)
+    position, orientation = pb.multiplyTransforms(*pb.invertTransform(*world.pose(name), physicsClientId=c),
+                                                  *world.anchor_pose(name), physicsClientId=c)
     return tuple(position) + tuple(pb.getEulerFromQuaternion(orientation, physicsClientId=c))
 
 
 def _settled(robot, anchor, loads, physics_rate, push):
-    """Mean relative poses (see _relative_pose), one per start, while ``push(world)`` loads the anchor."""
+    """Mean poses of the anchor in its robot (anchor_in_robot), one per start, while ``push(world)`` loads it."""
     settle = int(round(loads.settle_time * physics_rate))
     average = max(1, int(round(loads.average_time * physics_rate)))
     poses = []
@@ -119,7 +119,7 @@ def _settled(robot, anchor, loads, physics_rate, push):
                 push(world)
                 world.step(1)
                 if k >= settle:
-                    total = [t + v for t, v in zip(total, _relative_pose(world))]
+                    total = [t + v for t, v in zip(total, anchor_in_robot(world))]
             poses.append([t / average for t in total])
     return poses
 
@@ -157,7 +157,7 @@ def holder_pitch(robot, anchor, head_up, loads=HolderLoads(), physics_rate=200):
 
 def measure_holder_play(robot=RobotParams(), anchor=AnchorParams(), loads=HolderLoads(), physics_rate=200,
                         progress=None):
-    """HolderPlay of ``anchor`` in ``robot``'s holder (nine loads, each after every start).
+    """HolderPlay of ``anchor`` in ``robot``'s holder (ten loads, each after every start).
 
     ``progress``: optional callable taking a short text, called before each load.
     """
