@@ -55,12 +55,11 @@ from puzzlebot_mpc import pairs as pr
 from puzzlebot_sim.closed_loop import ClosedLoop, load_mpc_sim_settings, load_sim_config, make_world, \
     sim_config_path
 from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
+from puzzlebot_sim.trials import mated_pair
 from puzzlebot_sim.world import MocapModel, RobotStart
 
 COUPLE, DECOUPLE = "couple", "decouple"
 EXPERIMENT_CODES = {COUPLE: 1, DECOUPLE: 2}
-#: Gap between mated robots at a coupled start [m] (the start check allows 1 mm).
-MATE_GAP = 0.0003
 #: Simulated time the robots rest on the floor before a trial starts [s].
 SETTLE_S = 0.3
 #: An anchor turned further than this in its holder [rad] has flipped round (holder freedom: +/-0.5 rad).
@@ -317,8 +316,7 @@ def decouple_trial(seed, trial, ctx=None):
     wall0 = time.perf_counter()
     dy = rng.uniform(-p.mated_lateral_noise, p.mated_lateral_noise)
     dyaw = rng.uniform(-p.mated_heading_noise, p.mated_heading_noise)
-    starts = [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(L + MATE_GAP), dy, dyaw)]
-    world = make_world(ctx.cfg, starts, world_seed, mocap=ctx.mocap)
+    world = make_world(ctx.cfg, mated_pair(ctx.cfg.robot, dy, dyaw), world_seed, mocap=ctx.mocap)
     try:
         world.run(SETTLE_S)
         fields = {"start": {"o_lateral_mm": round(1e3 * dy, 3), "o_heading": round(dyaw, 4)}}

@@ -23,10 +23,9 @@ from typing import Optional
 import pybullet as pb
 
 from puzzlebot_sim.coupling import HEAD_INSERTED
-from puzzlebot_sim.holder import anchor_in_robot
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams
-from puzzlebot_sim.trials import MATE_GAP
-from puzzlebot_sim.world import RobotStart, SimWorld
+from puzzlebot_sim.trials import mated_pair
+from puzzlebot_sim.world import SimWorld
 
 
 @dataclass(frozen=True)
@@ -73,11 +72,10 @@ def _coupled(w):
 def _bench(robot, anchor, physics_rate, press_at, lift_at, seconds, watch):
     """Run the bench test for ``seconds``: ``press_at(t)`` and ``lift_at(t)`` [N] at time t [s] from the
     start of the loads; ``watch(world, t, lift)`` after each step, True to stop."""
-    starts = [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(robot.body_side + MATE_GAP), 0.0, 0.0)]
     half_x, half_z = robot.body_side / 2.0, robot.body_height / 2.0
     # (robot, x of its outer edge in its frame): a's front and o's back are lifted, the inner edges pressed
     ends = (("a", half_x), ("o", -half_x))
-    with SimWorld(robot, starts, physics_rate=physics_rate, anchor_params=anchor,
+    with SimWorld(robot, mated_pair(robot), physics_rate=physics_rate, anchor_params=anchor,
                   anchor_rest=AnchorRestParams(enabled=False)) as w:
         w.run(0.3)
         c = w.client
@@ -109,7 +107,7 @@ def measure_concave_fold(robot=RobotParams(), anchor=AnchorParams(), loads=FoldL
     def hold(w, t, lift):
         if t >= loads.ramp_time:
             held["fold"].append(_fold(w))
-            held["pitch"].append(anchor_in_robot(w, "a")[4])
+            held["pitch"].append(_pitch(w.anchor_in_robot("a")))
             held["coupled"] = _coupled(w)
         return False
 

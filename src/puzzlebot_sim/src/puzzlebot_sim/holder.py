@@ -97,16 +97,14 @@ class HolderPlay:
         return d
 
 
-def anchor_in_robot(world, name="a"):
-    """Robot ``name``'s anchor base in its base_link: (x, y, z) [m], (roll, pitch, yaw) [rad]."""
-    c = world.client
-    position, orientation = pb.multiplyTransforms(*pb.invertTransform(*world.pose(name), physicsClientId=c),
-                                                  *world.anchor_pose(name), physicsClientId=c)
-    return tuple(position) + tuple(pb.getEulerFromQuaternion(orientation, physicsClientId=c))
+def _pose6(world):
+    """Robot "a"'s anchor base in its base_link: (x, y, z) [m], (roll, pitch, yaw) [rad]."""
+    position, orientation = world.anchor_in_robot("a")
+    return tuple(position) + tuple(pb.getEulerFromQuaternion(orientation, physicsClientId=world.client))
 
 
 def _settled(robot, anchor, loads, physics_rate, push):
-    """Mean poses of the anchor in its robot (anchor_in_robot), one per start, while ``push(world)`` loads it."""
+    """Mean poses of the anchor in its robot (_pose6), one per start, while ``push(world)`` loads it."""
     settle = int(round(loads.settle_time * physics_rate))
     average = max(1, int(round(loads.average_time * physics_rate)))
     poses = []
@@ -119,7 +117,7 @@ def _settled(robot, anchor, loads, physics_rate, push):
                 push(world)
                 world.step(1)
                 if k >= settle:
-                    total = [t + v for t, v in zip(total, anchor_in_robot(world))]
+                    total = [t + v for t, v in zip(total, _pose6(world))]
             poses.append([t / average for t in total])
     return poses
 

@@ -53,10 +53,15 @@ def _status(w, anchor_robot, opening_robot):
     return DECOUPLED
 
 
-def _mated_pair(rng, robot, lateral=0.0003, yaw=0.01):
-    """Starts for a coupled pair: o right behind a, perturbed by the seed."""
-    dy, dyaw = rng.uniform(-lateral, lateral), rng.uniform(-yaw, yaw)
+def mated_pair(robot, dy=0.0, dyaw=0.0):
+    """Starts for a coupled pair: ``a`` at the origin facing +x, ``o`` right behind it with its opening
+    on ``a``'s anchor, offset by ``dy`` [m] and ``dyaw`` [rad]."""
     return [RobotStart("a", 0.0, 0.0, 0.0), RobotStart("o", -(robot.body_side + MATE_GAP), dy, dyaw)]
+
+
+def _mated_pair(rng, robot, lateral=0.0003, yaw=0.01):
+    """mated_pair perturbed by the seed."""
+    return mated_pair(robot, rng.uniform(-lateral, lateral), rng.uniform(-yaw, yaw))
 
 
 def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, yaw=0.02, anchor_yaw=0.3,

@@ -689,15 +689,20 @@ class SimWorld(BulletSession):
         """Anchor pairs (physical_pairs) followed by knob-hole pairs (physical_knob_pairs)."""
         return self.physical_pairs() + self.physical_knob_pairs()
 
-    def anchor_pullout(self, name):
-        """How far [m] ``name``'s anchor base is out of its pushed-in position, along the robot's x
-        axis (3-D: valid while the robot is tilted); None without an anchor."""
+    def anchor_in_robot(self, name):
+        """(position xyz [m], quaternion xyzw) of ``name``'s anchor base in the robot's base_link, or None
+        without an anchor."""
         anchor = self.anchor_pose(name)
         if anchor is None:
             return None
         inv = pb.invertTransform(*self.pose(name), physicsClientId=self.client)
-        x = pb.multiplyTransforms(*inv, anchor[0], [0, 0, 0, 1], physicsClientId=self.client)[0][0]
-        return self._anchor_home_x - x
+        return pb.multiplyTransforms(*inv, *anchor, physicsClientId=self.client)
+
+    def anchor_pullout(self, name):
+        """How far [m] ``name``'s anchor base is out of its pushed-in position, along the robot's x
+        axis (3-D: valid while the robot is tilted); None without an anchor."""
+        local = self.anchor_in_robot(name)
+        return None if local is None else self._anchor_home_x - local[0][0]
 
     def physical_knob_pairs(self):
         """Knob-hole pairs read off the robots' poses (puzzlebot_sim.coupling.classify_knob).
