@@ -35,7 +35,7 @@ bench: build
 ## make experiments [ARGS="--trials 20"]: the paper's experiments (coupling vs offset, decoupling, MPC time,
 ## force profile, chain down the step); resumable; rewrites the figures and tables of docs/results.md
 experiments: bench
-	@$(ENV) rosrun puzzlebot_sim experiments $(ARGS)
+	@$(ENV) rosrun puzzlebot_experiments experiments $(ARGS)
 
 clean:
 	rm -rf build devel install

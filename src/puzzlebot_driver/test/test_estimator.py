@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from puzzlebot_driver.estimator import VelocityEstimator
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 
 
 def feed(est, v, w, stamps, pose0=(0.1, -0.2, 0.5)):

@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import identify_synth as synth  # noqa: E402
 from puzzlebot_common.geometry import wrap_angle  # noqa: E402
-from puzzlebot_mpc.effects import ActuatorPlant  # noqa: E402
+from puzzlebot_common.effects import ActuatorPlant  # noqa: E402
 
 PHYSICS_RATE = 400   # Hz (sim.yaml)
 POSE_RATE = 100      # Hz

@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from puzzlebot_common.geometry import quaternion_from_yaw, wrap_angle
-from puzzlebot_mpc.effects import ActuatorModel, ActuatorPlant
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.effects import ActuatorModel, ActuatorPlant
+from puzzlebot_common.model import unicycle_arc
 
 CMD_RATE = 10.0          # Hz
 MOCAP_RATE = 100.0       # Hz

@@ -10,8 +10,8 @@ from puzzlebot_mpc.behaviors import BehaviorRequest
 from puzzlebot_mpc.compensation import Compensation, load_model
 from puzzlebot_mpc.control_loop import ControlLoop
 from puzzlebot_mpc.controller import MPCResult
-from puzzlebot_mpc.effects import ActuatorModel, ActuatorPlant
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.effects import ActuatorModel, ActuatorPlant
+from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.settings import MPCSettings
 
 SETTINGS = MPCSettings()

@@ -7,7 +7,7 @@ import pytest
 
 from puzzlebot_mpc.behaviors import SUCCEEDED, BehaviorRequest
 from puzzlebot_mpc.control_loop import ControlLoop
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.settings import MPCSettings
 
 NAMES = ["pz1", "pz2", "pz3"]

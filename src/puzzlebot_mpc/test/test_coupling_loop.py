@@ -16,7 +16,7 @@ from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors import FAILED, SUCCEEDED, BehaviorError, BehaviorRequest
 from puzzlebot_mpc.config_files import load_target_file
 from puzzlebot_mpc.control_loop import ControlLoop
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.settings import MPCSettings
 
 GEO = RobotGeometry()

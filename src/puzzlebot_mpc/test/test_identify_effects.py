@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import identify_synth as synth
-from puzzlebot_mpc.effects import EFFECTS, ActuatorModel
+from puzzlebot_common.effects import EFFECTS, ActuatorModel
 from puzzlebot_mpc.identify import core
 
 ROBOTS = 2

@@ -1,4 +1,4 @@
-"""The prediction functions of puzzlebot_mpc.effects and the tool's fast error metric agree.
+"""The prediction functions of puzzlebot_common.effects and the tool's fast error metric agree.
 
 The metric (identify/engine.py) integrates every window from one vectorised
 velocity signal; the MPC will use effects.actuator_state + effects.predict.
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 import identify_synth as synth
-from puzzlebot_mpc.effects import (ActuatorModel, ActuatorPlant, actuator_state, actuator_velocities,
+from puzzlebot_common.effects import (ActuatorModel, ActuatorPlant, actuator_state, actuator_velocities,
                                    predict)
 from puzzlebot_mpc.identify import IdentifySettings, engine
 from puzzlebot_mpc.identify.data import RobotData
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 
 ALL = {"input_delay": {"delay_s": 0.087}, "deadband": {"v_min": 0.01, "w_min": 0.1},
        "velocity_scale": {"k_v": 0.9, "k_w": 1.1}, "velocity_lag": {"tau_v_s": 0.12, "tau_w_s": 0.07},

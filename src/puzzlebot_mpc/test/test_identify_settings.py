@@ -30,7 +30,7 @@ def test_bad_settings(data, fragment):
 
 
 def test_parameters_at_a_search_bound_are_flagged():
-    from puzzlebot_mpc.effects import NOMINAL
+    from puzzlebot_common.effects import NOMINAL
     from puzzlebot_mpc.identify import core, fit
 
     params = dict(NOMINAL, delay_s=fit.PARAM_SPECS["delay_s"][1], tau_v_s=0.0, tau_w_s=0.1)

@@ -8,7 +8,7 @@ import pytest
 
 from puzzlebot_common.geometry import RobotGeometry, transform_point, inverse_transform_point
 from puzzlebot_mpc.controller import MultiRobotMPC, Objectives, PairObjective
-from puzzlebot_mpc.model import NX, euler_step, unicycle_arc
+from puzzlebot_common.model import NX, euler_step, unicycle_arc
 from puzzlebot_mpc.ocp import pair_residual_terms
 from puzzlebot_mpc.settings import MPCSettings
 

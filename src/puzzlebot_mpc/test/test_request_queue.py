@@ -4,7 +4,7 @@ import pytest
 
 from puzzlebot_mpc.behaviors import FAILED, IDLE, RUNNING, SUCCEEDED, BehaviorError, BehaviorRequest
 from puzzlebot_mpc.control_loop import ControlLoop
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.settings import MPCSettings
 
 NAMES = ["pz1", "pz2"]

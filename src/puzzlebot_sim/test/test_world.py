@@ -8,7 +8,7 @@ import pytest
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import wrap_angle
 from puzzlebot_common.robots import parse_robot_list
-from puzzlebot_mpc.effects import ActuatorModel
+from puzzlebot_common.effects import ActuatorModel
 from puzzlebot_sim.coupling import HEAD_INSERTED
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.scenario_starts import starts_from_config

@@ -32,3 +32,29 @@ def package_path(package, *parts):
         raise ConfigError("package %r not found on ROS_PACKAGE_PATH; source devel/setup.bash"
                           % package) from None
     return os.path.join(root, *parts)
+
+
+def shipped_config(package, *parts):
+    """Path of a file or directory shipped in ``<package>/config/`` (``shipped_config("puzzlebot_sim", "robot.yaml")``).
+
+    The source tree first (a checkout: tests, tools run without sourcing a
+    workspace), then the package rospkg finds (devel or install space).
+    """
+    here = os.path.dirname(os.path.abspath(__file__))
+    in_tree = os.path.normpath(os.path.join(here, "..", "..", "..", package, "config", *parts))
+    if os.path.exists(in_tree):
+        return in_tree
+    return package_path(package, "config", *parts)
+
+
+def load_section(path, key, required=False):
+    """The mapping under ``key`` in a YAML file ({} if absent and not ``required``); ConfigError otherwise."""
+    data = load_yaml(path)
+    if not isinstance(data, dict) or (required and key not in data):
+        raise ConfigError("%s: expected a mapping with key %r" % (path, key))
+    section = data.get(key)
+    if section is None:
+        return {}
+    if not isinstance(section, dict):
+        raise ConfigError("%s: %s must be a mapping, got %r" % (path, key, section))
+    return section

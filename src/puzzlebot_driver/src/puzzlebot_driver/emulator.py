@@ -4,7 +4,7 @@ An :class:`EmulatedRobot` turns the PWM lines it receives into motion:
 PWM -> per-wheel motor (delay, deadband, gain, imbalance, first-order lag;
 params.MotorParams) -> wheel rim speeds -> body velocity
 (puzzlebot_common.kinematics.body_velocity) -> pose (exact arc,
-puzzlebot_mpc.model.unicycle_arc). Its mocap pose is the true pose plus
+puzzlebot_common.model.unicycle_arc). Its mocap pose is the true pose plus
 seeded Gaussian noise.
 
 An :class:`EmulatedClient` plays the robot's ESP8266: a TCP client that
@@ -26,7 +26,7 @@ import numpy as np
 from puzzlebot_common.geometry import wrap_angle
 from puzzlebot_common.kinematics import body_velocity
 from puzzlebot_driver.protocol import ProtocolError, parse_pwm
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 
 _LOG = logging.getLogger("puzzlebot_driver.emulator")
 _MAX_LINE = 64          # bytes without a newline: dropped as one garbage line

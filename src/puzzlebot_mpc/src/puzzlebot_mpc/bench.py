@@ -30,7 +30,7 @@ from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.behaviors import DRIVE_ASSEMBLY, BehaviorRequest
 from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.control_loop import ControlLoop
-from puzzlebot_mpc.model import unicycle_arc
+from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.pairs import ANCHOR, coupling_polygon, head_margin, make_pair
 
 GRID_ROBOTS = (2, 4, 6, 8, 16, 32)

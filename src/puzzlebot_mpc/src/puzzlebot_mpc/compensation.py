@@ -2,7 +2,7 @@
 
 The MPC (controller.py, ocp.py) plans with a unicycle that does the planned
 (v, w) at once. A robot with the effects of an identified ``model.yaml``
-(puzzlebot_mpc/effects.py) does not: its commands act ``delay_s`` late, its
+(puzzlebot_common/effects.py) does not: its commands act ``delay_s`` late, its
 velocities lag, it turns when told to go straight, its speed is scaled, and
 the mocap's yaw is off its body axis. :class:`Compensation` makes the MPC plan
 for that robot without changing the optimal control problem, in three places
@@ -52,7 +52,7 @@ import numpy as np
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import wrap_angle
-from puzzlebot_mpc.effects import ActuatorModel, actuator_state, predict
+from puzzlebot_common.effects import ActuatorModel, actuator_state, predict
 
 #: Shortest command history fed to the actuator model [s] (the identification tool's).
 MIN_HISTORY_S = 2.0

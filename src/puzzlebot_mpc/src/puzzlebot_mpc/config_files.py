@@ -1,32 +1,34 @@
 """The package's shipped configuration: MPC settings and target configurations.
 
-Files are found next to this module in the source tree (tests, benchmark)
-or through rospkg (install space).
+Files are found in the source tree (tests, benchmark) or through rospkg
+(devel and install space): puzzlebot_common.config.shipped_config.
 """
 
-import os
-
-from puzzlebot_common.config import load_yaml, package_path
-from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.config import load_section, load_yaml, shipped_config
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.settings import MPCSettings
 from puzzlebot_mpc.targets import load_targets
 
 
 def config_path(name):
-    here = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "config", name)
-    if os.path.isfile(here):
-        return os.path.normpath(here)
-    return package_path("puzzlebot_mpc", "config", name)
+    """Path of a file in puzzlebot_mpc/config."""
+    return shipped_config("puzzlebot_mpc", name)
 
 
-def load_settings(path=None):
-    """MPCSettings from config/mpc.yaml (key ``mpc``)."""
-    path = path or config_path("mpc.yaml")
-    data = load_yaml(path)
-    if not isinstance(data, dict) or "mpc" not in data:
-        raise ConfigError("%s: expected a mapping with key 'mpc'" % path)
-    return MPCSettings.from_dict(data["mpc"], where="%s: mpc" % path)
+def load_settings(path=None, sim=False):
+    """MPCSettings from config/mpc.yaml (key ``mpc``), checked.
+
+    ``sim``: with the simulation's overrides, config/mpc_sim.yaml, on top, as
+    sim.launch loads them (lab.launch loads mpc.yaml alone).
+    """
+    paths = [path or config_path("mpc.yaml")] + ([config_path("mpc_sim.yaml")] if sim else [])
+    data = {}
+    for p in paths:
+        data.update(load_section(p, "mpc", required=p == paths[0]))
+    where = "%s: mpc" % " + ".join(paths)
+    settings = MPCSettings.from_dict(data, where=where)
+    settings.check(where=where)
+    return settings
 
 
 def load_target_file(geometry=None, path=None):

@@ -28,7 +28,7 @@ from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.behaviors import FAILED, RUNNING, BehaviorError, BehaviorManager
 from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
-from puzzlebot_mpc.model import NX
+from puzzlebot_common.model import NX
 from puzzlebot_mpc.pairs import PairBook
 
 

@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from puzzlebot_common.geometry import polygon_halfplanes
-from puzzlebot_mpc.model import NU, NX, euler_step
+from puzzlebot_common.model import NU, NX, euler_step
 from puzzlebot_mpc.ocp import POLY_ROWS, Problem, Structure
 
 SOLVERS = ("clarabel", "ipopt")

@@ -58,7 +58,7 @@ from typing import Dict, Tuple
 import casadi as ca
 import numpy as np
 
-from puzzlebot_mpc.model import NU, NX, euler_step
+from puzzlebot_common.model import NU, NX, euler_step
 
 POLY_ROWS = 4          # rows per coupling polygon (triangles get one inactive row)
 YAW_ROW_SCALE = 0.025  # m/rad: heading rows of coupled pairs share the polygon rows' slack (metres)

@@ -329,7 +329,7 @@ class SimParams:
     erp: float = 0.2                 # contact error reduction (per step)
     anchors: bool = True             # give every robot its soft anchor
     # injectable effects (off by default)
-    actuator_model: str = ""         # path of a model.yaml (puzzlebot_mpc/effects.py); empty = none
+    actuator_model: str = ""         # path of a model.yaml (puzzlebot_common/effects.py); empty = none
     wheel_imbalance: float = 0.0     # -, right wheel speed x (1 + k), left x (1 - k)
     mocap_position_std: float = 0.0  # m, Gaussian noise on published positions
     mocap_yaw_std: float = 0.0       # rad, Gaussian noise on published yaw

@@ -165,7 +165,7 @@ class SimWorld(BulletSession):
     ``gui``; keyword-only: ``anchor_params`` (AnchorParams, None = robots
     without anchors), ``world_params`` (WorldParams), ``solver_iterations``,
     ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
-    puzzlebot_mpc.effects.ActuatorModel applied to every robot's commands,
+    puzzlebot_common.effects.ActuatorModel applied to every robot's commands,
     None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
     ``mocap`` (MocapModel), ``anchor_rest`` (AnchorRestParams: when resting
     anchors are frozen to their robot; off with the GUI, which would not show them),
@@ -256,7 +256,7 @@ class SimWorld(BulletSession):
     def _make_plant(self):
         if self._actuator_model is None:
             return None
-        from puzzlebot_mpc.effects import ActuatorPlant
+        from puzzlebot_common.effects import ActuatorPlant
 
         return ActuatorPlant(self._actuator_model)
 

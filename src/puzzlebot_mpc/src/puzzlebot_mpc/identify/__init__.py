@@ -2,7 +2,7 @@
 
 ``identify(path)`` reads a bag or CSV of mocap poses and commands, measures
 the open-loop prediction error of the nominal unicycle, traces the residual to
-the actuator effects of ``puzzlebot_mpc.effects`` that explain it, adds those
+the actuator effects of ``puzzlebot_common.effects`` that explain it, adds those
 that earn their place on validation data, and analyses what remains.
 docs/model-identification.md describes the method; cli.py is the command line.
 """

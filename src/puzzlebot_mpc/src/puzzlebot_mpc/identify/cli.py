@@ -35,7 +35,7 @@ def parse_args(argv):
     p.add_argument("data", metavar="DATA", help="ROS 1 bag (/vicon/<r>/<r>, /<r>/cmd_vel) or CSV "
                    "(t,robot,x,y,yaw,v_cmd,w_cmd)")
     p.add_argument("--out", metavar="report.json", help="write the report as JSON")
-    p.add_argument("--model-out", metavar="model.yaml", help="write the identified model (puzzlebot_mpc.effects)")
+    p.add_argument("--model-out", metavar="model.yaml", help="write the identified model (puzzlebot_common.effects)")
     p.add_argument("--plot", metavar="residuals.png", help="write the residual plots")
     p.add_argument("--robots", metavar="LIST", help="robots to use: comma-separated names, or a robot-list YAML "
                    "file (its mocap subjects name the pose topics); default: every /vicon/<r>/<r> in the data")

@@ -4,7 +4,7 @@ import time
 from dataclasses import dataclass
 from typing import Dict, List
 
-from puzzlebot_mpc.effects import EFFECTS, NOMINAL, ActuatorModel
+from puzzlebot_common.effects import EFFECTS, NOMINAL, ActuatorModel
 from puzzlebot_mpc.identify import data, engine, fit, residuals
 from puzzlebot_mpc.identify.settings import IdentifySettings
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from puzzlebot_common.geometry import wrap_angle
-from puzzlebot_mpc.effects import actuator_velocities, command_pieces
+from puzzlebot_common.effects import actuator_velocities, command_pieces
 from puzzlebot_mpc.identify.data import DataError
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import stats
 from scipy.optimize import least_squares
 
-from puzzlebot_mpc.effects import EFFECTS, NOMINAL
+from puzzlebot_common.effects import EFFECTS, NOMINAL
 from puzzlebot_mpc.identify import engine
 
 #: Continuous parameters: (lower bound, upper bound, start value, typical scale), units as in EFFECTS.

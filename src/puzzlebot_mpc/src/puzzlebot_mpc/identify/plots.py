@@ -12,7 +12,7 @@ window, the signature of timing effects (delay, lag).
 
 import numpy as np
 
-from puzzlebot_mpc.effects import NOMINAL
+from puzzlebot_common.effects import NOMINAL
 from puzzlebot_mpc.identify import engine, residuals
 
 NOMINAL_STYLE = dict(color="0.6", lw=1.0)

@@ -1,6 +1,6 @@
 """The report: report.json (the issue's format plus details) and a readable table."""
 
-from puzzlebot_mpc.effects import EFFECTS
+from puzzlebot_common.effects import EFFECTS
 from puzzlebot_mpc.identify import residuals
 from puzzlebot_mpc.identify.core import PARAM_DIGITS
 

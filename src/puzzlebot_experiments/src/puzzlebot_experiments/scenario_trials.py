@@ -1,0 +1,175 @@
+"""A scenario run in-process over seeds: the same steps sim.launch runs, checked in Bullet.
+
+``sim.launch scenario:=NAME`` runs one scenario once through ROS; this runs it
+many times, in parallel processes, without ROS: the Bullet world and the MPC
+node's core in lockstep (``puzzlebot_experiments.closed_loop.ClosedLoop``) with the
+lab's Vicon noise, exactly as the experiments of docs/results.md do. Trial k
+of seed S uses the world seed drawn from ``SeedSequence([S, k])``.
+
+A step counts only when the behaviour succeeded *and* Bullet agrees:
+
+- couple / drive_assembly: every pair the controller holds coupled is seated
+  in Bullet (both barb tips behind the lips);
+- decouple: the pair's anchor is out of the opening, every other coupled pair
+  still seated;
+- after every step: every anchor still in its holder.
+
+A trial succeeds when every step does; it stops at the first failed step.
+"""
+
+import numpy as np
+
+from puzzlebot_common.robots import parse_robot_list
+from puzzlebot_mpc.behaviors import STATE_NAMES, SUCCEEDED, BehaviorRequest
+from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
+from puzzlebot_sim.coupling import HEAD_ALIGNED, HEAD_INSERTED
+from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
+from puzzlebot_sim.config import load_sim_config
+from puzzlebot_sim.world import RobotStart
+
+from puzzlebot_bringup.launch_config import sim_config
+from puzzlebot_bringup.scenario import parse_scenario
+
+SETTLE = 2.0     # s of simulated time a step may run past its own timeout before it counts as hung
+SETTLE_AT_START = 0.3  # s the robots settle on the floor before the first step
+
+
+def world_seed(seed, trial):
+    """The Bullet world's seed of trial ``trial`` of seed ``seed``."""
+    return int(np.random.SeedSequence([seed, trial]).generate_state(1)[0])
+
+
+def request_of(step):
+    """BehaviorRequest of a scenario Step."""
+    return BehaviorRequest(step.behavior, list(step.robots), [tuple(g) for g in step.goals],
+                           [tuple(v) for v in step.velocities], step.tolerance, step.timeout, step.target,
+                           [tuple(s) for s in step.slots], list(step.pair), step.distance)
+
+
+def physical_problems(cl, step, coupled, body_side):
+    """What Bullet contradicts after ``step`` (a list of short texts; empty: it agrees)."""
+    physical = cl.physical()
+    problems = ["%s-%s not seated" % key for key in coupled if physical.get(key, 0) != HEAD_INSERTED]
+    if step.behavior == "decouple":
+        a, b = step.pair
+        if max(physical.get((a, b), 0), physical.get((b, a), 0)) >= HEAD_ALIGNED:
+            problems.append("%s-%s still in the opening" % (a, b))
+    for name in cl.names:
+        inside, x, yaw = anchor_in_holder(cl.world, name, body_side)
+        if not inside:
+            problems.append("%s's anchor out of its holder (x %.1f mm, yaw %.2f rad)" % (name, 1e3 * x, yaw))
+    return problems
+
+
+def run_trial(directory, scenario, seed, trial, cfg=None):
+    """One run of ``scenario`` (from ``directory``); returns a JSON-able record.
+
+    ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
+    """
+    cfg = cfg or load_sim_config(mocap=MOCAP)
+    launch = sim_config(directory, scenario)
+    specs = parse_robot_list(launch.robots, where="scenario %s: robots" % scenario)
+    names = [s.name for s in specs]
+    sc = parse_scenario(launch.scenario, names, where="scenario %s" % scenario)
+    starts = [RobotStart(s.name, *sc.start[s.name][:3], pilot=s.pilot) for s in specs]
+    w = make_world(cfg, starts, world_seed(seed, trial), world=launch.world)
+    steps, ok = [], True
+    try:
+        w.run(SETTLE_AT_START)
+        cl = ClosedLoop(w, names=names)
+        for step in sc.steps:
+            req = request_of(step)
+            limit = (step.timeout or 60.0) + SETTLE
+            state, message, elapsed = cl.run_behavior(req, limit)
+            coupled = sorted(cl.loop.pairs.coupled)
+            problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
+            step_ok = state == SUCCEEDED and not problems
+            steps.append({"behavior": step.behavior, "state": STATE_NAMES.get(state, str(state)),
+                          "sim_seconds": round(elapsed, 2), "ok": step_ok,
+                          "problems": problems, "message": message[:160]})
+            if not step_ok:
+                ok = False
+                break
+        failed_steps = cl.failed_steps
+    finally:
+        w.close()
+    return {"scenario": scenario, "seed": seed, "trial": trial, "success": ok, "steps": steps,
+            "failed_mpc_steps": failed_steps}
+
+
+def run_task(task):
+    """run_trial for a (directory, scenario, seed, trial) tuple (a worker process's entry point)."""
+    return run_trial(*task)
+
+
+def summarize(records, scenario_steps):
+    """trials, successes, and per step: how many trials got through it and its median time [s]."""
+    per_step = []
+    for k, step in enumerate(scenario_steps):
+        done = [r["steps"][k] for r in records if len(r["steps"]) > k]
+        ok = [s for s in done if s["ok"]]
+        per_step.append({"step": step.describe(), "reached": len(done), "succeeded": len(ok),
+                         "median_s": round(float(np.median([s["sim_seconds"] for s in ok])), 2) if ok else None,
+                         "max_s": round(max(s["sim_seconds"] for s in ok), 2) if ok else None})
+    return {"trials": len(records), "successes": sum(r["success"] for r in records),
+            "failed_trials": sorted(r["trial"] for r in records if not r["success"]),
+            "failed_mpc_steps": int(sum(r["failed_mpc_steps"] for r in records)), "steps": per_step}
+
+
+def scenario_steps(directory, scenario):
+    """The parsed steps of a scenario (for the summary)."""
+    launch = sim_config(directory, scenario)
+    names = [s.name for s in parse_robot_list(launch.robots, where="scenario %s: robots" % scenario)]
+    return parse_scenario(launch.scenario, names, where="scenario %s" % scenario).steps
+
+
+def format_table(summary):
+    """Markdown table of the per-step summary."""
+    rows = ["| step | reached | succeeded (checked in Bullet) | median [s] | max [s] |", "|---|---|---|---|---|"]
+    for s in summary["steps"]:
+        rows.append("| %s | %d | %d | %s | %s |" % (s["step"], s["reached"], s["succeeded"],
+                                                     "-" if s["median_s"] is None else "%.1f" % s["median_s"],
+                                                     "-" if s["max_s"] is None else "%.1f" % s["max_s"]))
+    return "\n".join(rows)
+
+
+def plot_trials(records, scenario_steps, path, title=""):
+    """PNG timeline: one row per trial, one bar per step it reached (length: simulated seconds), green
+    when the step succeeded and Bullet agreed, red when it did not, with the reason next to it (the
+    first problem Bullet found, or the behaviour's message)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    records = sorted(records, key=lambda r: r["trial"])
+    fig, ax = plt.subplots(figsize=(12, 1.2 + 0.22 * len(records)))
+    hatches = ["", "//", "..", "xx", "\\\\"]
+    t_max = 1.0
+    for row, rec in enumerate(records):
+        t = 0.0
+        for k, st in enumerate(rec["steps"]):
+            ax.barh(row, st["sim_seconds"], left=t, height=0.7, color="C2" if st["ok"] else "C3",
+                    hatch=hatches[k % len(hatches)], edgecolor="white", linewidth=0.5)
+            t += st["sim_seconds"]
+            if not st["ok"]:
+                why = st["problems"][0] if st["problems"] else st.get("message", st["state"])[:60]
+                ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3")
+        t_max = max(t_max, t)
+    handles = [Patch(facecolor="0.6", hatch=hatches[k % len(hatches)], edgecolor="white",
+                     label="%d. %s" % (k + 1, step.describe())) for k, step in enumerate(scenario_steps)]
+    handles += [Patch(color="C2", label="succeeded, checked in Bullet"), Patch(color="C3", label="failed")]
+    ok = sum(r["success"] for r in records)
+    ax.set_title("%s: %d of %d trials succeeded" % (title, ok, len(records)), fontsize=10)
+    ax.set_yticks(range(len(records)))
+    ax.set_yticklabels([str(r["trial"]) for r in records], fontsize=7)
+    ax.set_ylim(len(records) - 0.5, -0.5)
+    ax.set_xlim(0.0, 1.45 * t_max)
+    ax.set_ylabel("trial")
+    ax.set_xlabel("simulated time from the first step [s]")
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.6 / (1.2 + 0.22 * len(records))),
+              ncol=min(3, len(handles)))
+    ax.grid(alpha=0.3, axis="x")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)

@@ -1,0 +1,54 @@
+"""scenario_trials: the in-process scenario runs (Bullet + MPC core), checked in Bullet."""
+
+import os
+
+import pytest
+
+from puzzlebot_common.config import shipped_config
+from puzzlebot_common.errors import ConfigError
+from puzzlebot_experiments.scenario_trials import (format_table, plot_trials, request_of, run_trial, scenario_steps,
+                                                   summarize)
+
+SCENARIOS = shipped_config("puzzlebot_bringup", "scenarios")
+
+
+def test_steps_become_the_requests_sim_launch_sends():
+    couple, drive, decouple = scenario_steps(SCENARIOS, "couple4_line")
+    assert request_of(couple).behavior == "couple" and request_of(couple).target == "line"
+    req = request_of(drive)
+    assert req.velocities == [(0.03, 0.0)] and req.distance == pytest.approx(0.3) and req.robots == ["pz1"]
+    assert request_of(decouple).pair == ["pz1", "pz2"]
+    with pytest.raises(ConfigError, match="unknown scenario"):
+        scenario_steps(SCENARIOS, "nope")
+
+
+def test_a_pair_cycle_run_is_checked_in_bullet_step_by_step():
+    rec = run_trial(SCENARIOS, "pair_cycle", seed=1, trial=0)
+    assert [s["behavior"] for s in rec["steps"]] == ["couple", "drive_assembly", "decouple"]
+    assert rec["success"], rec["steps"]
+    assert all(s["ok"] and not s["problems"] for s in rec["steps"])
+    assert rec["failed_mpc_steps"] == 0
+
+
+def test_summary_counts_steps_reached_and_passed():
+    steps = scenario_steps(SCENARIOS, "couple4_line")
+    ok = {"behavior": "x", "ok": True, "sim_seconds": 10.0, "problems": []}
+    bad = dict(ok, ok=False, problems=["pz1-pz2 not seated"])
+    records = [{"trial": 0, "success": True, "steps": [ok, ok, ok], "failed_mpc_steps": 0},
+               {"trial": 1, "success": False, "steps": [ok, bad], "failed_mpc_steps": 0}]
+    s = summarize(records, steps)
+    assert (s["trials"], s["successes"], s["failed_trials"]) == (2, 1, [1])
+    assert [(x["reached"], x["succeeded"]) for x in s["steps"]] == [(2, 2), (2, 1), (1, 1)]
+    assert "| couple all robots into line | 2 | 2 | 10.0 | 10.0 |" in format_table(s)
+
+
+def test_timeline_plot_is_written(tmp_path):
+    steps = scenario_steps(SCENARIOS, "couple4_line")
+    ok = {"behavior": "x", "state": "succeeded", "ok": True, "sim_seconds": 10.0, "problems": []}
+    bad = dict(ok, ok=False, problems=["pz1-pz2 not seated"])
+    timeout = dict(ok, ok=False, state="failed")
+    records = [{"trial": k, "success": k == 0, "steps": s}
+               for k, s in enumerate([[ok, ok, ok], [ok, bad], [timeout]])]
+    path = str(tmp_path / "t.png")
+    plot_trials(records, steps, path, "couple4_line, seed 1")
+    assert os.path.getsize(path) > 5000
