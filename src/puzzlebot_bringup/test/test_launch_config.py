@@ -81,3 +81,10 @@ def test_lab_config_robot_list_wins_and_the_scenario_must_fit(tmp_path):
         with pytest.raises(ConfigError) as e:
             lab_config(SCENARIOS, *args)
         assert fragment in str(e.value)
+
+
+def test_a_scattered_scenario_gets_its_start_poses_from_the_seed():
+    a, b, c = (sim_config(SCENARIOS, "line8", seed=s).scenario["start"] for s in (5, 5, 6))
+    assert a == b and a != c and len(a) == 8
+    assert "scatter" not in sim_config(SCENARIOS, "line8", seed=5).scenario
+    assert list(sim_config(SCENARIOS, "line8", robots="3", seed=5).scenario["start"]) == ["pz1", "pz2", "pz3"]

@@ -6,7 +6,7 @@ import pytest
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.robots import parse_robot_list, robot_names
-from puzzlebot_bringup.scenario import StepResult, format_summary, parse_scenario
+from puzzlebot_bringup.scenario import StepResult, format_summary, parse_scenario, scatter_starts
 
 SCENARIOS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "config", "scenarios", "*.yaml")))
 
@@ -15,8 +15,37 @@ SCENARIOS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "conf
 def test_shipped_scenarios_parse(path):
     data = load_yaml(path)
     names = robot_names(parse_robot_list(data))
-    scenario = parse_scenario(data["scenario"], names)
+    sc = dict(data["scenario"])
+    if "scatter" in sc:
+        sc["start"] = scatter_starts(sc.pop("scatter"), names, seed=3)
+    scenario = parse_scenario(sc, names)
     assert set(scenario.start) == set(names)
+
+
+SCATTER = {"rows": 2, "spacing": [0.10, 0.11], "lateral": 0.04, "yaw": 0.35, "row_spacing": 0.3}
+
+
+def test_a_scatter_is_drawn_from_the_seed_within_its_bounds():
+    names = ["r%d" % k for k in range(8)]
+    a, b, c = (scatter_starts(SCATTER, names, seed) for seed in (1, 1, 2))
+    assert a == b and a != c
+    for row in (names[:4], names[4:]):
+        xs = [a[n][0] for n in row]
+        assert all(0.10 - 1e-12 <= x0 - x1 <= 0.11 + 1e-12 for x0, x1 in zip(xs, xs[1:]))
+    assert all(abs(a[n][1] - (0.3 if n in names[4:] else 0.0)) <= 0.04 and abs(a[n][2]) <= 0.35 for n in names)
+
+
+def test_a_scatter_that_keeps_overlapping_is_a_clear_error():
+    def never(poses):
+        raise ConfigError("robots r0 and r1 are placed inside each other")
+    with pytest.raises(ConfigError, match="draws all put robots into each other"):
+        scatter_starts(SCATTER, ["r0", "r1"], 0, check=never)
+    with pytest.raises(ConfigError, match="spacing"):
+        scatter_starts(dict(SCATTER, spacing=[0.2, 0.1]), ["r0", "r1"], 0)
+    with pytest.raises(ConfigError, match="unknown key"):
+        scatter_starts(dict(SCATTER, spaceing=1), ["r0", "r1"], 0)
+    with pytest.raises(ConfigError, match="either 'start' or 'scatter'"):
+        parse_scenario({"name": "x", "start": {}, "scatter": SCATTER, "steps": []}, ["r0"])
 
 
 ROBOTS = ["pz1", "pz2"]

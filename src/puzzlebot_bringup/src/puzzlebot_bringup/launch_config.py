@@ -17,7 +17,10 @@ Arguments, as the launch files pass them:
 - ``robots`` (lab): the robot list file (required; every robot needs an
   ``ip_octet``); a scenario's robots must all be in it;
 - ``world`` (sim): "" = the scenario's ``world`` (default ``flat``), or a
-  world name of puzzlebot_sim (flat, step, gap).
+  world name of puzzlebot_sim (flat, step, gap);
+- ``seed`` (sim): the run's seed; a scenario with ``scatter`` instead of
+  ``start`` gets its start poses drawn from it (scenario.scatter_starts),
+  so a seed gives the same starts in sim.launch and in scenario_trials.
 
 Parts printed (YAML): ``robots`` -> /puzzlebot/robots, ``scenario`` ->
 /puzzlebot/scenario, ``world`` -> the sim node's ``sim/world``.
@@ -32,7 +35,7 @@ from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.robots import parse_robot_list, robot_names
 
-from puzzlebot_bringup.scenario import parse_scenario
+from puzzlebot_bringup.scenario import parse_scenario, scatter_starts
 
 DEFAULT_WORLD = "flat"
 
@@ -108,15 +111,27 @@ def _count(value):
     return n
 
 
-def sim_config(directory, scenario, robots="", world=""):
+def _scatter_check():
+    """The sim's start-pose check for the shipped robot model (bodies and anchors must not overlap)."""
+    from puzzlebot_sim.config import load_model
+    from puzzlebot_sim.scenario_starts import overlap_check
+
+    return overlap_check(*load_model())
+
+
+def sim_config(directory, scenario, robots="", world="", seed=0):
     """LaunchConfig of sim.launch (see the module docstring for the arguments)."""
     if not scenario:
         raise ConfigError("scenario:= is empty; known scenarios: %s" % ", ".join(known_scenarios(directory)))
     data = load_scenario(directory, scenario)
     specs = parse_robot_list(data["robots"], where="scenario %s: robots" % scenario)
     sc = dict(data["scenario"]) if isinstance(data["scenario"], dict) else data["scenario"]
+    if isinstance(sc, dict) and "scatter" in sc and "start" not in sc:
+        sc["start"] = scatter_starts(sc.pop("scatter"), robot_names(specs), seed, check=_scatter_check(),
+                                     where="scenario %s: scatter" % scenario)
     if not isinstance(sc, dict) or not isinstance(sc.get("start"), dict):
-        raise ConfigError("scenario %s: 'scenario' needs a 'start' mapping robot -> [x, y, yaw]" % scenario)
+        raise ConfigError("scenario %s: 'scenario' needs a 'start' mapping robot -> [x, y, yaw] (or a "
+                          "'scatter')" % scenario)
     hint = ""
     robots = str(robots).strip()
     if robots.endswith((".yaml", ".yml")) or os.sep in robots:
@@ -162,6 +177,7 @@ def lab_config(directory, robots, scenario=""):
     if scenario:
         data = load_scenario(directory, scenario)
         sc = dict(data["scenario"])
+        sc.pop("scatter", None)           # the lab's robots start where they stand
         names = robot_names(specs)
         scenario_robots = robot_names(parse_robot_list(data["robots"], where="scenario %s: robots" % scenario))
         missing = [n for n in scenario_robots if n not in names]

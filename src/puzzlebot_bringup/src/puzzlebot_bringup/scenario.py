@@ -9,7 +9,15 @@ robot list and the scenario::
       name: goto3
       description: ...
       world: flat                        # optional: sim world it needs (flat, step, gap); default flat
-      start: {pz1: [x, y, yaw]}          # m, m, rad, world frame
+      start: {pz1: [x, y, yaw]}          # m, m, rad, world frame; or instead:
+      scatter:                           # start poses drawn from the run's seed (scatter_starts)
+        rows: 1                          # robots split into rows in list order
+        spacing: [0.10, 0.11]            # m, centre to centre along a row: uniform in [lo, hi]
+        lateral: 0.04                    # m, each robot's sideways offset: uniform +/-
+        yaw: 0.35                        # rad, each robot's heading offset: uniform +/-
+        row_spacing: 0.2                 # m, between rows (optional)
+        origin: [0.0, 0.0]               # m, the first robot's nominal position (optional)
+        heading: 0.0                     # rad, the rows' direction; robots follow the first backwards
       steps:
         - behavior: go_to_goal
           goals: {pz1: [x, y]}           # m, world frame
@@ -43,9 +51,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Dict, List, Tuple
 
+import numpy as np
+
 from puzzlebot_common.errors import ConfigError
 
-SCENARIO_KEYS = {"name", "description", "world", "start", "steps"}
+SCENARIO_KEYS = {"name", "description", "world", "start", "scatter", "steps"}
+SCATTER_KEYS = {"rows", "spacing", "lateral", "yaw", "row_spacing", "origin", "heading"}
+SCATTER_SEED_TAG = 0x5CA77E2      # mixed into the run's seed for the scatter's random numbers
+SCATTER_REDRAWS = 200             # draws tried before a scatter that keeps overlapping is an error
 STEP_KEYS = {"behavior", "goals", "velocities", "tolerance", "timeout", "robots", "target", "slots", "pair",
              "velocity", "distance"}
 BEHAVIORS = ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly")
@@ -139,10 +152,80 @@ def _names(value, where, robots, allow_empty=False):
     return list(value)
 
 
+def _number(spec, key, where, default=None, minimum=0.0):
+    value = spec.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < minimum:
+        raise ConfigError("%s.%s: expected a number >= %g, got %r" % (where, key, minimum, value))
+    return float(value)
+
+
+def scatter_starts(spec, robots, seed, check=None, where="scenario.scatter"):
+    """Start poses {name: [x, y, yaw]} drawn for ``robots`` (names, in order) from ``spec`` and ``seed``.
+
+    The robots stand in ``rows`` rows (row r holds the r-th block of
+    ceil(N / rows) robots), each row along ``heading`` with the first robot
+    in front at ``origin`` + r ``row_spacing`` to its left, the next ones
+    behind it: gaps uniform in ``spacing`` [lo, hi], sideways offsets
+    uniform in +/- ``lateral``, headings ``heading`` +/- ``yaw``. The same
+    seed gives the same poses (sim.launch and scenario_trials draw them from
+    the run's seed). ``check(poses)``: raises ConfigError when poses
+    overlap (e.g. puzzlebot_sim.world.check_start_poses); a draw that fails
+    it is drawn again, up to SCATTER_REDRAWS times.
+    """
+    if not isinstance(spec, dict):
+        raise ConfigError("%s: expected a mapping, got %r" % (where, spec))
+    unknown = set(spec) - SCATTER_KEYS
+    if unknown:
+        raise ConfigError("%s: unknown key(s) %s; allowed: %s"
+                          % (where, ", ".join(sorted(map(str, unknown))), ", ".join(sorted(SCATTER_KEYS))))
+    rows = spec.get("rows", 1)
+    if isinstance(rows, bool) or not isinstance(rows, int) or not 1 <= rows <= max(1, len(robots)):
+        raise ConfigError("%s.rows: expected an integer from 1 to the robot count (%d), got %r"
+                          % (where, len(robots), rows))
+    lo, hi = _numbers(spec.get("spacing"), 2, where + ".spacing")
+    if not 0 < lo <= hi:
+        raise ConfigError("%s.spacing: expected [lo, hi] with 0 < lo <= hi, got %r" % (where, spec.get("spacing")))
+    lateral = _number(spec, "lateral", where, 0.0)
+    yaw = _number(spec, "yaw", where, 0.0)
+    row_spacing = _number(spec, "row_spacing", where, 0.2)
+    origin = _numbers(spec.get("origin", [0.0, 0.0]), 2, where + ".origin")
+    heading = _number(spec, "heading", where, 0.0, minimum=-math.inf)
+    per_row = -(-len(robots) // rows)
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, SCATTER_SEED_TAG])
+    c, s = math.cos(heading), math.sin(heading)
+    last = None
+    for _ in range(SCATTER_REDRAWS):
+        poses = {}
+        for r in range(rows):
+            along = 0.0
+            for k, name in enumerate(robots[r * per_row:(r + 1) * per_row]):
+                if k:
+                    along -= rng.uniform(lo, hi)
+                side = r * row_spacing + rng.uniform(-lateral, lateral)
+                poses[name] = [origin[0] + c * along - s * side, origin[1] + s * along + c * side,
+                               heading + rng.uniform(-yaw, yaw)]
+        if check is None:
+            return poses
+        try:
+            check(poses)
+            return poses
+        except ConfigError as e:
+            last = e
+    raise ConfigError("%s: %d draws all put robots into each other (last: %s); widen spacing or row_spacing"
+                      % (where, SCATTER_REDRAWS, last))
+
+
 def parse_scenario(data, robots, where="scenario"):
-    """Parse the ``scenario`` mapping; ``robots`` is the list of robot names."""
+    """Parse the ``scenario`` mapping; ``robots`` is the list of robot names.
+
+    A ``scatter`` must have been turned into ``start`` poses first (scatter_starts: they depend on the seed).
+    """
     if not isinstance(data, dict):
         raise ConfigError("%s: expected a mapping, got %r" % (where, data))
+    if "scatter" in data and "start" in data:
+        raise ConfigError("%s: give either 'start' or 'scatter', not both" % where)
+    if "scatter" in data:
+        raise ConfigError("%s: 'scatter' start poses are drawn from a seed: scatter_starts first" % where)
     for key in ("name", "start", "steps"):
         if key not in data:
             raise ConfigError("%s: missing '%s'" % (where, key))

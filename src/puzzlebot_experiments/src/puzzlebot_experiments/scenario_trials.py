@@ -67,12 +67,13 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
     ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
     """
     cfg = cfg or load_sim_config(mocap=MOCAP)
-    launch = sim_config(directory, scenario)
+    wseed = world_seed(seed, trial)
+    launch = sim_config(directory, scenario, seed=wseed)
     specs = parse_robot_list(launch.robots, where="scenario %s: robots" % scenario)
     names = [s.name for s in specs]
     sc = parse_scenario(launch.scenario, names, where="scenario %s" % scenario)
     starts = [RobotStart(s.name, *sc.start[s.name][:3], pilot=s.pilot) for s in specs]
-    w = make_world(cfg, starts, world_seed(seed, trial), world=launch.world)
+    w = make_world(cfg, starts, wseed, world=launch.world)
     steps, ok = [], True
     try:
         w.run(SETTLE_AT_START)
