@@ -10,10 +10,11 @@ from puzzlebot_common.geometry import wrap_angle
 from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_common.effects import ActuatorModel
 from puzzlebot_sim.coupling import HEAD_INSERTED
+from puzzlebot_sim.mocap import MocapModel
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.scenario_starts import starts_from_config
 from puzzlebot_sim.urdf import URDF_MARGIN, anchor_urdf, body_parts, robot_urdf
-from puzzlebot_sim.world import MocapModel, RobotStart, SimWorld
+from puzzlebot_sim.world import RobotStart, SimWorld
 
 
 def test_urdf_is_well_formed_with_wheels_and_casters():
@@ -127,7 +128,7 @@ def test_robot_pushes_with_about_half_a_newton(v, dc_motor):
                                   physicsClientId=c)
         w.set_command("pz1", v, 0.0)
         w.run(1.0)
-        force = sum(cp[9] for cp in pb.getContactPoints(w.robots["pz1"]["body"], wall, physicsClientId=c))
+        force = sum(cp[9] for cp in pb.getContactPoints(w.robots["pz1"].body, wall, physicsClientId=c))
         assert 0.40 < force <= 0.52
 
 

@@ -126,7 +126,7 @@ class ClosedLoop:
 
 def make_world(cfg, starts, seed, mocap=None, world="flat"):
     """A SimWorld from a SimConfig (puzzlebot_sim.config), built as the sim node builds it; ``mocap``: a
-    world.MocapModel in place of the config's."""
+    puzzlebot_sim.mocap.MocapModel in place of the config's."""
     sim = replace(cfg.sim, seed=seed, world=world, gui=False)
     w = SimWorld.from_params(sim, cfg.robot, starts, cfg.anchor, cfg.world, anchor_rest=cfg.anchor_rest)
     if mocap is not None:

@@ -83,7 +83,7 @@ def _bench(robot, anchor, physics_rate, press_at, lift_at, seconds, watch):
             t = k / float(physics_rate)
             lift = lift_at(t)
             for name, x in ends:
-                body, (position, orientation) = w.robots[name]["body"], w.pose(name)
+                body, (position, orientation) = w.robots[name].body, w.pose(name)
                 for point, force in (([x, 0.0, half_z], lift), ([-x, 0.0, -half_z], -press_at(t))):
                     at = pb.multiplyTransforms(position, orientation, point, [0, 0, 0, 1], physicsClientId=c)[0]
                     pb.applyExternalForce(body, -1, [0.0, 0.0, force], at, pb.WORLD_FRAME, physicsClientId=c)

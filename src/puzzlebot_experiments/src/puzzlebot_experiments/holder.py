@@ -124,7 +124,7 @@ def _settled(robot, anchor, loads, physics_rate, push):
 
 def _on_base(force, torque=(0.0, 0.0, 0.0)):
     def push(world):
-        body, c = world.robots["a"]["anchor"], world.client
+        body, c = world.robots["a"].anchor, world.client
         pb.applyExternalForce(body, -1, force, world.anchor_pose("a")[0], pb.WORLD_FRAME, physicsClientId=c)
         if any(torque):
             pb.applyExternalTorque(body, -1, torque, pb.WORLD_FRAME, physicsClientId=c)
@@ -134,7 +134,7 @@ def _on_base(force, torque=(0.0, 0.0, 0.0)):
 def _on_head(force):
     def push(world):
         head = world.anchor_points("a")[0]
-        pb.applyExternalForce(world.robots["a"]["anchor"], 0, force, head, pb.WORLD_FRAME,
+        pb.applyExternalForce(world.robots["a"].anchor, 0, force, head, pb.WORLD_FRAME,
                               physicsClientId=world.client)
     return push
 

@@ -150,7 +150,8 @@ def mpc_settings(demo):
 # ------------------------------------------------------------------ worlds
 def make_world(demo, injected, starts, seed, anchors):
     from puzzlebot_sim.params import AnchorParams, RobotParams
-    from puzzlebot_sim.world import MocapModel, SimWorld
+    from puzzlebot_sim.mocap import MocapModel
+    from puzzlebot_sim.world import SimWorld
 
     mocap = MocapModel(demo.mocap_position_std, demo.mocap_yaw_std, demo.mocap_dropout, demo.mocap_heading_offset)
     return SimWorld(RobotParams(), starts, physics_rate=demo.physics_rate,

@@ -224,7 +224,7 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
     rng = np.random.default_rng(seed)
     wp = WorldParams(stage_height=stage_height)
     with _world(_edge_pair(rng, robot), sim, robot, anchor, world="step", world_params=wp) as w:
-        c, body = w.client, w.robots["a"]["body"]
+        c, body = w.client, w.robots["a"].body
         w.run(0.2)
         for n in ("a", "o"):
             w.set_command(n, 0.05, 0.0)
@@ -234,7 +234,7 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
         for n in ("a", "o"):
             w.set_command(n, 0.0, 0.0)
         position, orientation = w.pose("o")
-        pb.createConstraint(w.robots["o"]["body"], -1, -1, -1, pb.JOINT_FIXED, [0, 0, 0], [0, 0, 0], position,
+        pb.createConstraint(w.robots["o"].body, -1, -1, -1, pb.JOINT_FIXED, [0, 0, 0], [0, 0, 0], position,
                             [0, 0, 0, 1], orientation, physicsClientId=c)
         w.run(settle_s)
         locked = _head_locked(w, "a", "o", robot, anchor)

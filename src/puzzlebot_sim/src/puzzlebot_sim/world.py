@@ -23,6 +23,7 @@ centre of its base block, axes parallel to the robot's at rest.
 import math
 import os
 from dataclasses import dataclass
+from typing import List, Optional, Tuple
 
 import numpy as np
 import pybullet as pb
@@ -31,8 +32,10 @@ from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
 from puzzlebot_common.kinematics import wheel_speeds
 from puzzlebot_sim import coupling
-from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
+from puzzlebot_sim.anchor_rest import AnchorRest, NoAnchorRest
+from puzzlebot_sim.bullet_session import BulletSession
+from puzzlebot_sim.mocap import MocapModel
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, WorldParams
 from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
                                 robot_urdf)
@@ -48,9 +51,6 @@ _MASKS = {GROUP_TERRAIN: GROUP_TERRAIN | GROUP_BODY | GROUP_WHEEL | GROUP_ANCHOR
 #: An anchor's joint motors are re-set when a joint moved by more than this [rad].
 ANCHOR_UPDATE_RAD = 0.002
 
-#: Largest yaw of an anchor in its holder assumed by the resting-anchor tests [rad] (about +/-0.5 rad).
-ANCHOR_MAX_YAW = 0.6
-
 #: Gravitational acceleration [m/s^2].
 GRAVITY = 9.81
 
@@ -61,6 +61,8 @@ MATE_YAW_TOLERANCE = 0.03
 
 @dataclass
 class RobotStart:
+    """Where a robot starts: (x, y) [m] and yaw [rad] of its base_link in the world frame."""
+
     name: str
     x: float
     y: float
@@ -68,18 +70,22 @@ class RobotStart:
     pilot: bool = False
 
 
-@dataclass(frozen=True)
-class MocapModel:
-    """Measurement effects on published poses (all off by default)."""
+@dataclass(eq=False)
+class SimRobot:
+    """One simulated robot (``SimWorld.robots[name]``): its Bullet bodies, command and motor settings."""
 
-    position_std: float = 0.0    # m, Gaussian noise on x and y
-    yaw_std: float = 0.0         # rad, Gaussian noise on yaw
-    dropout: float = 0.0         # probability that a measurement is lost
-    heading_offset: float = 0.0  # rad, marker-frame yaw minus body yaw
-
-    @classmethod
-    def from_sim(cls, sim):
-        return cls(sim.mocap_position_std, sim.mocap_yaw_std, sim.mocap_dropout, sim.mocap_heading_offset)
+    name: str
+    body: int                                    # Bullet body id of the robot
+    wheels: List[int]                            # driven wheel joints, the left ones first
+    n_left: int                                  # how many of ``wheels`` are on the left
+    pilot: bool                                  # four driven wheels, no casters
+    anchor: Optional[int] = None                 # Bullet body id of its anchor (None: no anchors, or frozen)
+    plant: Optional[object] = None               # puzzlebot_common.effects.ActuatorPlant (None: ideal)
+    command: Tuple[float, float] = (0.0, 0.0)    # commanded body velocity (m/s, rad/s)
+    driven: Tuple[float, float] = (0.0, 0.0)     # body velocity the wheels are driven at (m/s, rad/s)
+    wheel_targets: Optional[Tuple[float, float]] = None   # wheel speed setting (left, right) [rad/s]
+    anchor_q: Optional[Tuple[float, float, float]] = None  # anchor joint angles at its last motor setting [rad]
+    anchor_state: Optional[list] = None          # anchor joint states read this step (pb.getJointStates)
 
 
 # ------------------------------------------------------------- start checks
@@ -143,19 +149,6 @@ def check_start_poses(starts, body_side, anchor_reach=0.0, anchor_half_width=0.0
                                       % (p.name, q.name, q.name, p.name, 1e3 * anchor_reach))
 
 
-def _obb_overlap(a, b, grow):
-    """True when oriented rectangle ``a`` grown by ``grow`` [m] overlaps rectangle ``b``.
-
-    Rectangles are (centre x, centre y, cos yaw, sin yaw, half length, half width)."""
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    for ux, uy in ((a[2], a[3]), (-a[3], a[2]), (b[2], b[3]), (-b[3], b[2])):
-        ra = (a[4] + grow) * abs(a[2] * ux + a[3] * uy) + (a[5] + grow) * abs(-a[3] * ux + a[2] * uy)
-        rb = b[4] * abs(b[2] * ux + b[3] * uy) + b[5] * abs(-b[3] * ux + b[2] * uy)
-        if abs(dx * ux + dy * uy) > ra + rb:
-            return False
-    return True
-
-
 # -------------------------------------------------------------------- world
 class SimWorld(BulletSession):
     """PuzzleBots (and their anchors) in a Bullet world. Commands are body velocities (v, w).
@@ -167,11 +160,14 @@ class SimWorld(BulletSession):
     ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
     puzzlebot_common.effects.ActuatorModel applied to every robot's commands,
     None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
-    ``mocap`` (MocapModel), ``anchor_rest`` (AnchorRestParams: when resting
-    anchors are frozen to their robot; off with the GUI, which would not show them),
-    ``tilted_solver_iterations`` (solver iterations while any robot is tilted by more
-    than ``tilt_threshold`` rad: robots falling over an edge or hanging load the light
-    anchor links with large impulses, which the solver needs more iterations for).
+    ``mocap`` (puzzlebot_sim.mocap.MocapModel), ``anchor_rest`` (AnchorRestParams:
+    when resting anchors are frozen to their robot, puzzlebot_sim.anchor_rest; off
+    with the GUI, which would not show them), ``tilted_solver_iterations`` (solver
+    iterations while any robot is tilted by more than ``tilt_threshold`` rad: robots
+    falling over an edge or hanging load the light anchor links with large impulses,
+    which the solver needs more iterations for).
+
+    ``robots``: name -> SimRobot (Bullet body ids, command, motor settings), in start order.
     """
 
     def __init__(self, robot_params, starts, world="flat", physics_rate=200, gui=False, *,
@@ -224,33 +220,19 @@ class SimWorld(BulletSession):
         if self._monitor_steps < 1 or abs(self._monitor_steps * self.dt - anchor_rest.check_period) > 1e-9:
             raise ConfigError("anchor_rest.check_period (%g s) must be a whole number of physics steps (%g s)"
                               % (anchor_rest.check_period, self.dt))
-        self._rest = None
-        if anchor_params is not None and anchor_rest.enabled and not gui:
-            self._rest = anchor_rest
-            self._anchor_mass = anchor_params.mass
-            self._exposed = self._exposed_anchor_box(robot_params, anchor_params)
-        if self._rest is not None:
-            box = self._exposed
-            half = ((box[1] - box[0]) / 2.0, box[2])
-            self._zone_radius = max(math.hypot(robot_params.body_side / 2, robot_params.body_side / 2),
-                                    abs(box[0] + box[1]) / 2.0 + math.hypot(*half))
-            self._box_radius = math.hypot(*half)
         self.terrain = WORLDS[world](c, self.world_params)
         self.static_bodies = self.terrain.bodies
         for body in self.static_bodies:
             self._set_group(body, -1, GROUP_TERRAIN)
         self._urdf_paths = {}
-        self.robots = {}
-        self._cmd = {}
-        self._plants = {}
         self._actuator_model = actuator_model
-        self._driven = {}
-        for s in starts:
-            self.robots[s.name] = self._spawn(s)
-            self._cmd[s.name] = (0.0, 0.0)
-            self._driven[s.name] = (0.0, 0.0)
-            self._plants[s.name] = self._make_plant()
+        self.robots = {s.name: self._spawn(s) for s in starts}      # name -> SimRobot, in start order
         self.names = names
+        if anchor_params is not None and anchor_rest.enabled and not gui:
+            self._rest = AnchorRest(anchor_rest, robot_params, anchor_params, self._anchor_home_x, c, self.terrain,
+                                    self.robots, self._load_anchor, self._anchor_points_of, GRAVITY)
+        else:
+            self._rest = NoAnchorRest()
 
     # ----------------------------------------------------------------- setup
     def _make_plant(self):
@@ -301,11 +283,10 @@ class SimWorld(BulletSession):
                 pb.changeDynamics(body, links[name], lateralFriction=0.0, spinningFriction=0.0,
                                   rollingFriction=0.0, physicsClientId=c)
                 self._set_group(body, links[name], GROUP_WHEEL)
-        robot = {"body": body, "wheels": wheels, "n_left": n_left, "pilot": s.pilot, "anchor": None,
-                 "wheel_targets": None, "anchor_q": None, "anchor_state": None,
-                 "rest": None, "calm_since": None, "last_velocity": None}
+        robot = SimRobot(s.name, body, wheels, n_left, s.pilot)
         if self.anchor_params is not None:
-            robot["anchor"] = self._spawn_anchor(s, z0)
+            robot.anchor = self._spawn_anchor(s, z0)
+        robot.plant = self._make_plant()
         return robot
 
     def _spawn_anchor(self, s, z0):
@@ -332,12 +313,11 @@ class SimWorld(BulletSession):
     def reset_anchor(self, name, yaw=0.0):
         """Put ``name``'s anchor back in its holder (pushed in, barbs at rest), turned by
         ``yaw`` [rad] relative to the robot (experiments: the anchor's free yaw)."""
-        if self.robots[name]["rest"] is not None:
-            self._wake(name)
-        c, body = self.client, self.robots[name]["anchor"]
+        self._rest.release(name)
+        c, robot = self.client, self.robots[name]
+        body = robot.anchor
         if body is None:
             return
-        self.robots[name]["calm_since"] = None
         rx, ry, ryaw = self.pose2d(name)
         z = self.pose(name)[0][2] + self.params.opening_z
         x = rx + math.cos(ryaw) * self._anchor_home_x
@@ -347,22 +327,23 @@ class SimWorld(BulletSession):
         pb.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=c)
         for j in range(3):
             pb.resetJointState(body, j, 0.0, 0.0, physicsClientId=c)
-        self.robots[name]["anchor_q"] = None
+        robot.anchor_q = None
 
     # --------------------------------------------------------------- control
     def set_command(self, name, v, w):
         """Body velocity command (m/s, rad/s) from now on (through the actuator effects, if any)."""
-        if name not in self._cmd:
+        robot = self.robots.get(name)
+        if robot is None:
             raise KeyError("unknown robot %r" % name)
         v, w = float(v), float(w)
-        self._cmd[name] = (v, w)
-        plant = self._plants[name]
-        if plant is not None:
-            plant.command(self.time, v, w)
+        robot.command = (v, w)
+        if robot.plant is not None:
+            robot.plant.command(self.time, v, w)
 
     def driven_velocity(self, name):
         """The body velocity the wheels are driven at now (after the actuator effects)."""
-        return self._driven.get(name, (0.0, 0.0))
+        robot = self.robots.get(name)
+        return robot.driven if robot is not None else (0.0, 0.0)
 
     def step(self, n=1):
         """Advance the world by ``n`` fixed steps of ``dt`` seconds."""
@@ -381,33 +362,26 @@ class SimWorld(BulletSession):
         c, p, t = self.client, self.params, self.time
         k = self.wheel_imbalance
         w_max, radius, torque = p.wheel_max_speed, p.wheel_radius, p.wheel_max_torque
-        for name, robot in self.robots.items():
-            plant = self._plants[name]
-            if plant is not None:
-                v, w = plant.advance(t, self.dt)
+        for robot in self.robots.values():
+            if robot.plant is not None:
+                v, w = robot.plant.advance(t, self.dt)
             else:
-                v, w = self._cmd[name]
-                if robot["wheel_targets"] is not None and self._driven[name] == (v, w):
+                v, w = robot.command
+                if robot.wheel_targets is not None and robot.driven == (v, w):
                     continue                              # same command: the motors keep their setting
-            self._driven[name] = (v, w)
+            robot.driven = (v, w)
             vl, vr = wheel_speeds(v, w, p.wheel_base)
             wl = max(-w_max, min(w_max, (1.0 - k) * vl / radius))
             wr = max(-w_max, min(w_max, (1.0 + k) * vr / radius))
-            if (wl, wr) != robot["wheel_targets"]:        # Bullet keeps motor settings between steps
-                robot["wheel_targets"] = (wl, wr)
-                n_left = robot["n_left"]
-                targets = [wl] * n_left + [wr] * (len(robot["wheels"]) - n_left)
-                pb.setJointMotorControlArray(robot["body"], robot["wheels"], pb.VELOCITY_CONTROL,
+            if (wl, wr) != robot.wheel_targets:           # Bullet keeps motor settings between steps
+                robot.wheel_targets = (wl, wr)
+                targets = [wl] * robot.n_left + [wr] * (len(robot.wheels) - robot.n_left)
+                pb.setJointMotorControlArray(robot.body, robot.wheels, pb.VELOCITY_CONTROL,
                                              targetVelocities=targets, forces=[torque] * len(targets),
                                              physicsClientId=c)
         if self.anchor_params is not None:
             self._apply_anchor_torques()
-        if self._rest is not None:
-            for robot in self.robots.values():
-                rest = robot["rest"]
-                if rest is not None:        # a frozen anchor's weight stays on its robot
-                    pb.applyExternalForce(robot["body"], -1, rest["weight"], rest["com"], pb.LINK_FRAME,
-                                          physicsClientId=c)
+        self._rest.apply_weights()
 
     def _apply_anchor_torques(self):
         """Barb torque limits from the profile at the current angles (see puzzlebot_sim.anchor).
@@ -419,17 +393,17 @@ class SimWorld(BulletSession):
         c, a, tmap = self.client, self.anchor_params, self._torque_map
         joints = [0, 1, 2]
         for robot in self.robots.values():
-            body = robot["anchor"]
+            body = robot.anchor
             if body is None:
                 continue
             states = pb.getJointStates(body, joints, physicsClientId=c)
-            robot["anchor_state"] = states
+            robot.anchor_state = states
             q = (states[0][0], states[1][0], states[2][0])
-            last = robot["anchor_q"]
+            last = robot.anchor_q
             if last is not None and max(abs(q[0] - last[0]), abs(q[1] - last[1]), abs(q[2] - last[2])) \
                     < ANCHOR_UPDATE_RAD:
                 continue
-            robot["anchor_q"] = q
+            robot.anchor_q = q
             pb.setJointMotorControlArray(
                 body, joints, pb.VELOCITY_CONTROL,
                 targetVelocities=[-a.neck_servo_rate * q[0], -a.barb_servo_rate * q[1], -a.barb_servo_rate * q[2]],
@@ -440,79 +414,10 @@ class SimWorld(BulletSession):
         """Simulated time since the start [s]."""
         return self.steps * self.dt
 
-    # ------------------------------------------------------- resting anchors
+    # ------------------------------------------------------ every check period
     def resting_anchors(self):
-        """Names of the robots whose anchor is frozen at rest (see AnchorRestParams)."""
-        return [n for n in self.names if self.robots[n]["rest"] is not None]
-
-    def _exposed_anchor_box(self, p, a):
-        """Where the anchor can be outside its robot's back face, in the robot's frame:
-        (x0, x1, half width) [m], for any travel in the holder, any barb angle and a yaw
-        of up to ANCHOR_MAX_YAW."""
-        h = p.body_side / 2.0
-        travel = p.holder_depth - p.holder_wall - 2 * a.base_radius
-        tip_out = -h - (self._anchor_home_x - travel - a.length)          # head tip pulled out
-        reach = tip_out + a.barb_length + a.barb_tip_radius                # + a barb flipped backward
-        lever = reach + h + (self._anchor_home_x - travel)                 # ball centre to the far end
-        half_width = lever * math.sin(ANCHOR_MAX_YAW) + AnchorGeometry(a).hinge[1] + a.barb_length + a.barb_tip_radius
-        return (-h - reach, -h, half_width)
-
-    def _zones(self, poses):
-        """Per robot: its body and its exposed anchor box as (centre, c, s, half x, half y) in the world."""
-        h = self.params.body_side / 2.0
-        x0, x1, hw = self._exposed
-        zones = {}
-        for name in self.names:
-            (x, y, _), orn = poses[name]
-            yaw = yaw_from_quaternion(*orn)
-            c, s = math.cos(yaw), math.sin(yaw)
-            ax = (x0 + x1) / 2.0
-            zones[name] = ((x, y, c, s, h, h), (x + c * ax, y + s * ax, c, s, (x1 - x0) / 2.0, hw))
-        return zones
-
-    def _anchor_clear(self, name, zones, poses):
-        """True when no other robot or anchor is within the clearance of ``name``'s anchor,
-        the robot is level and the terrain under the anchor is the robot's."""
-        rest = self._rest
-        box = zones[name][1]
-        grow = rest.clearance
-        far = self._zone_radius + self._box_radius + grow
-        for other in self.names:
-            if other == name:
-                continue
-            body, anchor = zones[other]
-            if (body[0] - box[0]) ** 2 + (body[1] - box[1]) ** 2 > far * far:
-                continue                                  # too far for its body or anchor to matter
-            if _obb_overlap(box, body, grow) or _obb_overlap(box, anchor, grow):
-                return False
-        (x, y, z), orn = poses[name]
-        if 1.0 - 2.0 * (orn[0] ** 2 + orn[1] ** 2) < math.cos(rest.max_tilt):
-            return False                                  # tilted: the anchor may slide or hang
-        ground = self.terrain.height(x, y)
-        if abs(z - ground - self.params.body_centre_height) > self.params.ground_clearance:
-            return False                                  # lifted or falling
-        cx, cy, c, s, hx, hy = box
-        for dx, dy in ((0, 0), (-1, -1), (-1, 1), (1, -1), (1, 1)):
-            px, py = dx * (hx + grow), dy * (hy + grow)
-            if self.terrain.height(cx + c * px - s * py, cy + s * px + c * py) != ground:
-                return False                              # an edge or a step under the anchor
-        return True
-
-    def _anchor_calm(self, robot, position, lin, ang):
-        """True when the awake anchor rests in its holder: joints near rest, no motion relative to the robot."""
-        rest, states = self._rest, robot["anchor_state"]
-        if states is None:
-            return False
-        if any(abs(st[0]) > rest.max_joint_angle or abs(st[1]) > rest.max_rel_rate for st in states):
-            return False
-        c = self.client
-        a_pos = pb.getBasePositionAndOrientation(robot["anchor"], physicsClientId=c)[0]
-        a_lin, a_ang = pb.getBaseVelocity(robot["anchor"], physicsClientId=c)
-        r = [a_pos[k] - position[k] for k in range(3)]
-        carried = [lin[0] + ang[1] * r[2] - ang[2] * r[1], lin[1] + ang[2] * r[0] - ang[0] * r[2],
-                   lin[2] + ang[0] * r[1] - ang[1] * r[0]]
-        return (math.dist(a_lin, carried) <= rest.max_rel_speed
-                and math.dist(a_ang, ang) <= rest.max_rel_rate)
+        """Names of the robots whose anchor is frozen at rest (see puzzlebot_sim.anchor_rest)."""
+        return self._rest.resting()
 
     def _monitor(self):
         """Every check period: solver iterations for tilted robots, resting anchors."""
@@ -522,79 +427,12 @@ class SimWorld(BulletSession):
             self._tilted = tilted
             pb.setPhysicsEngineParameter(numSolverIterations=self._solver_iterations[tilted],
                                          physicsClientId=self.client)
-        if self._rest is not None:
-            self._update_rest(poses)
-
-    def _update_rest(self, poses):
-        """Freeze anchors that rest with nothing near; wake frozen ones that something may disturb."""
-        c, rest = self.client, self._rest
-        zones = self._zones(poses)
-        for name in self.names:
-            robot = self.robots[name]
-            lin, ang = pb.getBaseVelocity(robot["body"], physicsClientId=c)
-            last, robot["last_velocity"] = robot["last_velocity"], (lin, ang)
-            steady = (last is not None and math.dist(lin, last[0]) <= rest.max_dv
-                      and abs(ang[2] - last[1][2]) <= rest.max_dw)
-            quiet = steady and self._anchor_clear(name, zones, poses)
-            if robot["rest"] is not None:
-                if not quiet:
-                    self._wake(name)
-            elif quiet and robot["anchor"] is not None and self._anchor_calm(robot, poses[name][0], lin, ang):
-                if robot["calm_since"] is None:
-                    robot["calm_since"] = self.time
-                elif self.time - robot["calm_since"] >= rest.settle_time - 1e-9:
-                    self._freeze(name, poses[name])
-            else:
-                robot["calm_since"] = None
-
-    def _freeze(self, name, pose):
-        """Take ``name``'s resting anchor out of the Bullet world; it follows the robot from now on."""
-        c, a, robot = self.client, self.anchor_params, self.robots[name]
-        body = robot["anchor"]
-        inv_pos, inv_orn = pb.invertTransform(*pose, physicsClientId=c)
-
-        def local(position, orientation=(0, 0, 0, 1)):
-            return pb.multiplyTransforms(inv_pos, inv_orn, position, orientation, physicsClientId=c)
-        base = pb.getBasePositionAndOrientation(body, physicsClientId=c)
-        links = pb.getLinkStates(body, [0, 1, 2], physicsClientId=c)
-        masses = [a.base_mass, a.head_mass, a.barb_mass, a.barb_mass]
-        centres = [base[0]] + [st[0] for st in links]
-        com = [sum(m * p[k] for m, p in zip(masses, centres)) / sum(masses) for k in range(3)]
-        head, tips = self._anchor_points_of(body)
-        gravity_local = local([0, 0, -GRAVITY * self._anchor_mass])[0]
-        origin_local = local([0, 0, 0])[0]
-        robot["rest"] = {"base": local(*base), "q": self.anchor_joints(name),
-                         "points": [local(q)[0] for q in [head] + list(tips)],
-                         "com": local(com)[0],
-                         "weight": [gravity_local[k] - origin_local[k] for k in range(3)]}
-        pb.removeBody(body, physicsClientId=c)
-        robot["anchor"] = None
-        robot["anchor_state"] = None
-        robot["calm_since"] = None
-
-    def _wake(self, name):
-        """Put ``name``'s frozen anchor back into the Bullet world where it rested, moving with the robot."""
-        c, robot = self.client, self.robots[name]
-        rest = robot["rest"]
-        pos, orn = self.pose(name)
-        a_pos, a_orn = pb.multiplyTransforms(pos, orn, *rest["base"], physicsClientId=c)
-        body = self._load_anchor(a_pos, a_orn)
-        lin, ang = pb.getBaseVelocity(robot["body"], physicsClientId=c)
-        r = [a_pos[k] - pos[k] for k in range(3)]
-        carried = [lin[0] + ang[1] * r[2] - ang[2] * r[1], lin[1] + ang[2] * r[0] - ang[0] * r[2],
-                   lin[2] + ang[0] * r[1] - ang[1] * r[0]]
-        pb.resetBaseVelocity(body, carried, ang, physicsClientId=c)
-        for j, q in enumerate(rest["q"]):
-            pb.resetJointState(body, j, q, 0.0, physicsClientId=c)
-        robot["anchor"] = body
-        robot["rest"] = None
-        robot["anchor_q"] = None
-        robot["calm_since"] = None
+        self._rest.update(poses, self.time)
 
     # ------------------------------------------------------------- readouts
     def pose(self, name):
         """(position xyz [m], quaternion xyzw) of the robot's base_link in the world."""
-        return pb.getBasePositionAndOrientation(self.robots[name]["body"], physicsClientId=self.client)
+        return pb.getBasePositionAndOrientation(self.robots[name].body, physicsClientId=self.client)
 
     def pose2d(self, name):
         """Planar pose (x, y, yaw) of the robot [m, m, rad]."""
@@ -603,18 +441,19 @@ class SimWorld(BulletSession):
 
     def velocity(self, name):
         """Actual body velocity (v forward [m/s], w yaw rate [rad/s]) of the robot."""
-        lin, ang = pb.getBaseVelocity(self.robots[name]["body"], physicsClientId=self.client)
+        lin, ang = pb.getBaseVelocity(self.robots[name].body, physicsClientId=self.client)
         yaw = self.pose2d(name)[2]
         return (math.cos(yaw) * lin[0] + math.sin(yaw) * lin[1], ang[2])
 
     def anchor_pose(self, name):
         """(position xyz, quaternion xyzw) of the robot's anchor base, or None without anchors."""
-        robot = self.robots[name]
-        if robot["rest"] is not None:
-            return pb.multiplyTransforms(*self.pose(name), *robot["rest"]["base"], physicsClientId=self.client)
-        if robot["anchor"] is None:
+        frozen = self._rest.frozen(name)
+        if frozen is not None:
+            return pb.multiplyTransforms(*self.pose(name), *frozen.base, physicsClientId=self.client)
+        body = self.robots[name].anchor
+        if body is None:
             return None
-        return pb.getBasePositionAndOrientation(robot["anchor"], physicsClientId=self.client)
+        return pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
 
     def anchor_pose2d(self, name):
         pose = self.anchor_pose(name)
@@ -625,22 +464,22 @@ class SimWorld(BulletSession):
 
     def anchor_joints(self, name):
         """(neck, left barb, right barb) joint angles [rad]; barb 0 = rest, > 0 flared, < 0 folded."""
-        rest = self.robots[name]["rest"]
-        if rest is not None:
-            return rest["q"]
-        body = self.robots[name]["anchor"]
+        frozen = self._rest.frozen(name)
+        if frozen is not None:
+            return frozen.q
+        body = self.robots[name].anchor
         states = pb.getJointStates(body, [0, 1, 2], physicsClientId=self.client)
         return tuple(s[0] for s in states)
 
     def anchor_points(self, name):
         """World positions of the anchor's head tip and its two barb tips (centres)."""
-        rest = self.robots[name]["rest"]
-        if rest is not None:
+        frozen = self._rest.frozen(name)
+        if frozen is not None:
             pos, orn = self.pose(name)
             world = [pb.multiplyTransforms(pos, orn, q, [0, 0, 0, 1], physicsClientId=self.client)[0]
-                     for q in rest["points"]]
+                     for q in frozen.points]
             return world[0], world[1:]
-        return self._anchor_points_of(self.robots[name]["anchor"])
+        return self._anchor_points_of(self.robots[name].anchor)
 
     def _anchor_points_of(self, body):
         a = self.anchor_params
@@ -729,25 +568,11 @@ class SimWorld(BulletSession):
     def measure(self, name):
         """Mocap measurement of the robot: (position xyz, quaternion xyzw), or None if dropped.
 
-        Applies the mocap model (noise, dropout, heading offset) and the
-        actuator model's heading offset; draws from this world's seeded RNG.
+        Applies ``mocap`` (puzzlebot_sim.mocap.MocapModel: noise, dropout, heading offset)
+        and the actuator model's heading offset; draws from this world's seeded RNG.
         """
-        m = self.mocap
-        if m.dropout > 0.0 and self.rng.random() < m.dropout:
-            return None
-        pos, orn = self.pose(name)
-        plant = self._plants[name]
-        offset = m.heading_offset + (plant.offset if plant is not None else 0.0)
-        if offset == 0.0 and m.position_std == 0.0 and m.yaw_std == 0.0:
-            return pos, orn
-        x, y, z = pos
-        if m.position_std > 0.0:
-            dx, dy = self.rng.normal(0.0, m.position_std, 2)
-            x, y = x + dx, y + dy
-        dyaw = offset + (self.rng.normal(0.0, m.yaw_std) if m.yaw_std > 0.0 else 0.0)
-        rot = pb.getQuaternionFromEuler([0, 0, dyaw])
-        orn = pb.multiplyTransforms([0, 0, 0], rot, [0, 0, 0], orn, physicsClientId=self.client)[1]
-        return (x, y, z), orn
+        plant = self.robots[name].plant
+        return self.mocap.measure(self.pose(name), self.rng, self.client, plant.offset if plant is not None else 0.0)
 
     # ------------------------------------------------------------ lifecycle
     @classmethod
