@@ -33,18 +33,10 @@ def starts_from_config(robots, start, where="scenario.start"):
     return out
 
 
-def anchor_reach(robot, anchor):
-    """(how far the anchor sticks out of the back face when pushed home [m], its half width [m])."""
-    from puzzlebot_sim.anchor import AnchorGeometry
-
-    home_x = -robot.body_side / 2 + robot.holder_depth - anchor.base_radius
-    return max(-robot.body_side / 2 - (home_x - anchor.length), 0.0), AnchorGeometry(anchor).half_width()
-
-
 def overlap_check(robot, anchor):
     """A function of {name: [x, y, yaw]} that raises ConfigError when bodies or anchors would start inside
     each other (as SimWorld does at start-up) for this robot and anchor model."""
-    from puzzlebot_sim.world import check_start_poses
+    from puzzlebot_sim.world import anchor_reach, check_start_poses
 
     reach, half_width = anchor_reach(robot, anchor)
 

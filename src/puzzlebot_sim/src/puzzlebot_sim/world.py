@@ -122,6 +122,17 @@ def mated(anchor_pose, opening_pose, body_side):
             and abs(wrap_angle(opening_pose[2] - anchor_pose[2])) <= MATE_YAW_TOLERANCE)
 
 
+def anchor_home_x(robot, anchor):
+    """x [m] of the anchor base's centre in its robot's frame when pushed home in the holder."""
+    return -robot.body_side / 2 + robot.holder_depth - anchor.base_radius
+
+
+def anchor_reach(robot, anchor):
+    """(how far the anchor sticks out of the back face when pushed home [m], its half width at rest [m])."""
+    reach = -robot.body_side / 2 - (anchor_home_x(robot, anchor) - anchor.length)
+    return max(reach, 0.0), AnchorGeometry(anchor).half_width()
+
+
 def check_start_poses(starts, body_side, anchor_reach=0.0, anchor_half_width=0.0):
     """Raise ConfigError if robots (or an anchor and a robot) would start inside each other.
 
@@ -193,10 +204,8 @@ class SimWorld(BulletSession):
             self._anchor_geometry = AnchorGeometry(anchor_params)
             self._torque_map = BarbTorqueMap(anchor_params, robot_params.mouth_width, robot_params.lip_depth / 2)
             anchor_params.check_fits(robot_params)
-            self._anchor_home_x = -robot_params.body_side / 2 + robot_params.holder_depth - anchor_params.base_radius
-            reach = -robot_params.body_side / 2 - (self._anchor_home_x - anchor_params.length)
-            reach = max(reach, 0.0)
-            half_width = self._anchor_geometry.half_width()
+            self._anchor_home_x = anchor_home_x(robot_params, anchor_params)
+            reach, half_width = anchor_reach(robot_params, anchor_params)
         check_start_poses(starts, robot_params.body_side, reach, half_width)
         self.world_name = world
         self.dt = 1.0 / physics_rate
