@@ -22,8 +22,9 @@ from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams, WorldParams
 from puzzlebot_sim.world import GRAVITY, RobotStart, SimWorld
 
-#: Control period of the scripted drivers [s] (the MPC's rate).
-CONTROL_DT = 0.05
+#: Period of the scripted (open-loop) drivers of these trials [s]: how often they read the world and
+#: set commands. Not the MPC's period (MPCSettings.dt), which the closed-loop trials use.
+SCRIPT_DT = 0.05
 #: Gap left between mated robots at a coupled start [m] (start-pose tolerance is 1 mm).
 MATE_GAP = 0.0003
 #: edge_lock_trial(stop="edge"): the back robot stops with its front this far from the edge [m].
@@ -83,7 +84,7 @@ def coupling_trial(seed, driver="anchor", speed=0.05, gap=0.03, lateral=0.0005, 
         w.set_command("a", -speed, 0.0) if driver == "anchor" else w.set_command("o", speed, 0.0)
         t0 = w.time
         while w.time - t0 < timeout:
-            w.run(CONTROL_DT)
+            w.run(SCRIPT_DT)
             if _status(w, "a", "o") == HEAD_INSERTED:
                 return {"trial": "couple", "seed": seed, "driver": driver, "speed": speed, "success": True,
                         "time_s": round(w.time - t0, 3)}
@@ -105,7 +106,7 @@ def pullout_trial(seed, driver="opening", speed=0.05, duration=5.0, sim=SimParam
         w.set_command("o", -speed, 0.0) if driver == "opening" else w.set_command("a", speed, 0.0)
         t0, flare, lost = w.time, 0.0, None
         while w.time - t0 < duration:
-            w.run(CONTROL_DT)
+            w.run(SCRIPT_DT)
             flare = max(flare, *w.anchor_joints("a")[1:])
             if lost is None and _status(w, "a", "o") == DECOUPLED:
                 lost = round(w.time - t0, 3)
@@ -129,7 +130,7 @@ def wiggle_trial(seed, v_bias=0.02, w_max=3.0, period=2.0, timeout=20.0, sim=Sim
         t0 = w.time
         while w.time - t0 < timeout:
             w.set_command("a", v_bias, sign * w_max * math.sin(b * (w.time - t0)))
-            w.run(CONTROL_DT)
+            w.run(SCRIPT_DT)
             if _status(w, "a", "o") == DECOUPLED:
                 return {"trial": "wiggle", "seed": seed, "success": True, "time_s": round(w.time - t0, 3)}
         return {"trial": "wiggle", "seed": seed, "success": False, "time_s": None}
@@ -185,7 +186,7 @@ def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip",
             w.set_command(n, speed, 0.0)
         t_end, decoupled_at = None, None
         while t_end is None or w.time - t_end < hold_s:
-            w.run(CONTROL_DT)
+            w.run(SCRIPT_DT)
             if decoupled_at is None and _status(w, "a", "o") == DECOUPLED:
                 decoupled_at = round(w.time, 2)
             if t_end is None and (_pitch(w, "a") > tip_angle if stop == "tip" else
@@ -230,7 +231,7 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
             w.set_command(n, 0.05, 0.0)
         t0 = w.time
         while _pitch(w, "a") < EDGE_TIP_ANGLE and w.time - t0 < tip_timeout:
-            w.run(CONTROL_DT)
+            w.run(SCRIPT_DT)
         for n in ("a", "o"):
             w.set_command(n, 0.0, 0.0)
         position, orientation = w.pose("o")
@@ -245,8 +246,8 @@ def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max
             held = load
             if load >= max_load_n:
                 break
-            load = min(max_load_n, load + ramp_n_per_s * CONTROL_DT)
-            for _ in range(int(round(CONTROL_DT / w.dt))):
+            load = min(max_load_n, load + ramp_n_per_s * SCRIPT_DT)
+            for _ in range(int(round(SCRIPT_DT / w.dt))):
                 pb.applyExternalForce(body, -1, [0.0, 0.0, -load], w.pose("a")[0], pb.WORLD_FRAME,
                                       physicsClientId=c)
                 w.step()
@@ -308,7 +309,7 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
                 slow = True                    # the last robot tips over the edge: the others only creep
                 for nm in names[1:]:
                     w.set_command(nm, -floor_speed, 0.0)
-            w.run(CONTROL_DT)
+            w.run(SCRIPT_DT)
             for i in range(n - 1):
                 barb[i] = max(barb[i], *w.anchor_joints(names[i])[1:])
                 pulled[i] = max(pulled[i], w.anchor_pullout(names[i]))
@@ -375,3 +376,53 @@ def summarize(results):
     times = [r["time_s"] for r in ok if r.get("time_s") is not None]
     return {"trials": len(results), "successes": len(ok), "rate": len(ok) / len(results) if results else 0.0,
             "mean_time_s": round(float(np.mean(times)), 3) if times else None}
+
+
+def seat_pull_trial(seed, chain=3, speed=0.03, lateral=0.002, anchor_yaw=0.3, standoff=0.016, push_s=2.5,
+                    pull_speed=0.02, pull_s=1.0, heading_gain=2.0, sim=SimParams(), robot=RobotParams(),
+                    anchor=AnchorParams()):
+    """What a pull tells about a pushed-home anchor (puzzlebot_mpc.docking's seated band).
+
+    A robot ``d`` stands ``standoff`` behind a mated chain of ``chain``
+    robots, offset sideways by up to +/- ``lateral`` and facing it; the
+    chain's last anchor is turned in its holder by up to +/- ``anchor_yaw``
+    (seeded). ``d`` pushes straight in at ``speed`` holding the chain's
+    heading for ``push_s``, then backs away at ``pull_speed`` for ``pull_s``
+    and pushes home again for ``push_s``. Records whether the faces got home,
+    the anchor's state in Bullet after the push and after the second push, and
+    how far the pull stretched the pair before it stalled (the gap's growth
+    [m]). Success: home and seated in Bullet after the second push.
+    """
+    rng = np.random.default_rng(seed)
+    gap0 = robot.body_side + MATE_GAP
+    starts = [RobotStart("c%d" % k, -k * gap0, 0.0, 0.0) for k in range(chain)]
+    last = "c%d" % (chain - 1)
+    dy, dyaw, ayaw = rng.uniform(-lateral, lateral), rng.uniform(-0.03, 0.03), rng.uniform(-anchor_yaw, anchor_yaw)
+    starts.append(RobotStart("d", -(chain - 1) * gap0 - robot.body_side - standoff, dy, dyaw))
+
+    def gap(w):
+        pa, pd = w.pose2d(last), w.pose2d("d")
+        c, s = math.cos(pd[2]), math.sin(pd[2])
+        return c * (pa[0] - pd[0]) + s * (pa[1] - pd[1]) - robot.body_side
+
+    def drive(w, v, seconds):
+        t0 = w.time
+        while w.time - t0 < seconds - 1e-9:
+            dth = math.remainder(w.pose2d(last)[2] - w.pose2d("d")[2], 2 * math.pi)
+            w.set_command("d", v, max(-1.0, min(1.0, heading_gain * dth)))
+            w.run(SCRIPT_DT)
+
+    with _world(starts, sim, robot, anchor) as w:
+        w.reset_anchor(last, ayaw)
+        w.run(0.3)
+        drive(w, speed, push_s)
+        home_gap, pushed = gap(w), _status(w, last, "d")
+        drive(w, -pull_speed, pull_s)
+        growth = gap(w) - home_gap
+        drive(w, speed, push_s)
+        repushed = _status(w, last, "d")
+        return {"trial": "seatpull", "seed": seed, "success": gap(w) < 0.003 and repushed == HEAD_INSERTED,
+                "gap_after_push_mm": round(1e3 * home_gap, 2), "seated_after_push": pushed == HEAD_INSERTED,
+                "seated_after_repush": repushed == HEAD_INSERTED, "gap_after_repush_mm": round(1e3 * gap(w), 2),
+                "pull_growth_mm": round(1e3 * growth, 2), "lateral_mm": round(1e3 * dy, 2),
+                "anchor_yaw_rad": round(ayaw, 3)}

@@ -1,0 +1,226 @@
+"""Seating an anchor pair and proving it seated, from what the hardware has: poses, commands, time.
+
+The MPC brings an anchor pair's head to the partner's mouth (the *approach*,
+Algorithm 2's decoupled -> head_aligned). From there the geometry of the
+poses can no longer tell a seated anchor from one whose barb sits on the
+lip: both leave the robots face to face. What tells them apart is how the
+pair answers a pull. A robot cannot pull a seated anchor out (the barbs
+hold 0.6 N at 4 mm, a robot pushes 0.5 N: facts.md), so the pair stretches
+by the anchor's travel in its holder plus the barbs' give, then stalls; an
+anchor that is not behind the lips gives way further, or not at all when a
+barb is folded against the head. :class:`Docking` runs one pair through
+
+=========  ==============================================================
+phase      what the mover (the robot that docks) does
+=========  ==============================================================
+approach   the MPC aligns the pair (alignment cost, approach carrot)
+push       drives straight into the partner at ``push_speed``, holding
+           the partner's heading (the mouth and the anchor's free yaw do
+           the last millimetres); "home" when the gap between the faces is
+           below ``home_gap`` for ``home_steps`` steps
+pull       backs away at ``pull_speed`` for ``pull_time``: the gap must
+           grow by ``seat_pull_min`` .. ``seat_pull_max`` (the seated band)
+repush     drives home again (the pull leaves the anchor part way out)
+backoff    backs away at ``backoff_speed`` for ``backoff_time``, then
+           approaches again: after a push that did not get home
+           (``push_timeout``) or a pull outside the band
+seated     the pair is coupled (the controller's head_inserted)
+=========  ==============================================================
+
+The mover's partner (and its assembly) holds still throughout. A pair that
+was seated and is later found open (:func:`seat_measure`: gap above
+``home_gap`` or the anchor point off the opening's axis by more than
+``repair_lateral`` for ``repair_time``) is re-seated from ``push``.
+
+The seated band is a property of the anchor and its holder: in the Bullet
+model a seated pair stretches 9.0-12.3 mm before it stalls; a barb folded
+against the head 7.1-7.5 mm; an anchor not behind the lips comes out
+(18-21 mm; ``rosrun puzzlebot_experiments anchor_trials seatpull`` measures
+it). On the lab's robots, measure it the same way (docs/lab-measurements.md).
+
+Geometry (robot frames, metres): the anchor robot ``i`` stands in front of
+the opening robot ``j``; C_a is the centre of i's back face, C_o of j's
+front face. In j's frame, C_a is at (L/2 + gap, lateral); the pair's
+relative heading is theta_i - theta_j.
+"""
+
+import math
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+from puzzlebot_common.geometry import inverse_transform_point, transform_point
+
+APPROACH, PUSH, PULL, REPUSH, BACKOFF, SEATED = "approach", "push", "pull", "repush", "backoff", "seated"
+PHASES = (APPROACH, PUSH, PULL, REPUSH, BACKOFF, SEATED)
+#: phases in which the docking manoeuvre, not the MPC's alignment cost, drives the mover
+DRIVEN = (PUSH, PULL, REPUSH, BACKOFF)
+
+
+@dataclass(frozen=True)
+class DockingSettings:
+    """How a pair is pushed home, tested and re-seated (MPCSettings ``dock_*``; units m, s, rad)."""
+
+    push_speed: float = 0.03          # m/s: straight push into the partner
+    push_heading_gain: float = 2.0    # 1/s: w = gain x (partner heading - mover heading) while pushing/pulling
+    push_start_gap: float = 0.016     # m: the push starts once the faces are this close ...
+    push_lateral: float = 0.0025      # m: ... with C_a this close to the opening's axis ...
+    push_yaw: float = 0.12            # rad: ... and the headings this close
+    push_timeout: float = 2.5         # s: not home after this long: back off
+    home_gap: float = 0.003           # m: faces closer than this: pushed home
+    home_steps: int = 3               # control steps the pair must be home in a row
+    pull_speed: float = 0.02          # m/s: the pull test
+    pull_time: float = 1.0            # s
+    seat_pull_min: float = 0.0085     # m: a seated pair stretches at least this much under the pull ...
+    seat_pull_max: float = 0.0135     # m: ... and at most this much
+    repush_timeout: float = 1.5       # s: back home after the pull within this
+    backoff_speed: float = 0.03       # m/s
+    backoff_time: float = 0.8         # s
+    repair_lateral: float = 0.0015    # m: a coupled pair with C_a this far off the opening's axis ...
+    repair_gap: float = 0.003         # m: ... or its faces this far apart ...
+    repair_time: float = 1.0          # s: ... for this long is re-seated
+
+    def check(self, where="mpc"):
+        from puzzlebot_common.errors import ConfigError
+
+        for name in self.__dataclass_fields__:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ConfigError("%s.dock_%s: must be a number > 0, got %r" % (where, name, value))
+        if not self.seat_pull_min < self.seat_pull_max:
+            raise ConfigError("%s: dock_seat_pull_min (%g) must be below dock_seat_pull_max (%g)"
+                              % (where, self.seat_pull_min, self.seat_pull_max))
+        if self.pull_speed * self.pull_time <= self.seat_pull_max:
+            raise ConfigError("%s: the pull (dock_pull_speed x dock_pull_time = %.1f mm) must reach past "
+                              "dock_seat_pull_max (%.1f mm), or an anchor that comes out would look seated"
+                              % (where, 1e3 * self.pull_speed * self.pull_time, 1e3 * self.seat_pull_max))
+
+
+def seat_measure(pair, pose_i, pose_j):
+    """(gap between the faces [m], lateral offset of C_a from the opening's axis [m], relative heading [rad])
+    of an anchor pair from the robots' poses (x, y, theta)."""
+    ca = transform_point(pose_i, pair.point_i[:2])
+    q = inverse_transform_point(pose_j, ca)
+    return (float(q[0] - pair.point_j[0]), float(q[1] - pair.point_j[1]),
+            math.remainder(pose_i[2] - pose_j[2], 2 * math.pi))
+
+
+@dataclass
+class Command:
+    """What the docking manoeuvre asks of the mover this step: body velocity (v [m/s], w [rad/s])."""
+
+    v: float
+    w: float
+
+
+class Docking:
+    """The docking manoeuvre of one anchor pair (see the module docstring).
+
+    ``mover``: "i" (the anchor robot backs in) or "j" (the opening robot
+    drives forward). ``start``: the first phase (``approach``; ``push`` to
+    re-seat a pair that was coupled).
+    """
+
+    def __init__(self, settings, mover="j", start=APPROACH, now=None):
+        self.s = settings
+        self.mover = mover
+        self.phase = start
+        self.since = now
+        self.home_count = 0
+        self.attempts = 0             # pushes started
+        self.pull_from = None         # gap when the pull started [m]
+        self.last_growth = None       # stretch measured by the last pull [m]
+        self.note = ""                # why the last phase change happened
+
+    # ------------------------------------------------------------ helpers
+    def _to(self, phase, now, note=""):
+        self.phase, self.since, self.home_count, self.note = phase, now, 0, note
+        if phase == PUSH:
+            self.attempts += 1
+
+    def _elapsed(self, now):
+        return 0.0 if self.since is None or now is None else now - self.since
+
+    @property
+    def sign(self):
+        """+1 when "into the partner" is forward for the mover (the opening robot), -1 when backward."""
+        return 1.0 if self.mover == "j" else -1.0
+
+    def ready_to_push(self, gap, lateral, dtheta):
+        """The approach has brought the pair close and lined up enough for a straight push."""
+        s = self.s
+        return gap <= s.push_start_gap and abs(lateral) <= s.push_lateral and abs(dtheta) <= s.push_yaw
+
+    # -------------------------------------------------------------- update
+    def update(self, gap, lateral, dtheta, now):
+        """Advance the phase from this step's measurement (seat_measure). Returns True when the pair has
+        just been proven seated."""
+        s, phase, t = self.s, self.phase, self._elapsed(now)
+        home = gap <= s.home_gap
+        self.home_count = self.home_count + 1 if home else 0
+        if phase == APPROACH:
+            if self.ready_to_push(gap, lateral, dtheta):
+                self._to(PUSH, now, "lined up %.1f mm off axis, %.1f mm out" % (1e3 * lateral, 1e3 * gap))
+        elif phase == PUSH:
+            if self.home_count >= s.home_steps:
+                self._to(PULL, now, "pushed home")
+                self.pull_from = gap
+            elif t >= s.push_timeout:
+                self._to(BACKOFF, now, "push %d did not get home (%.1f mm out after %.1f s)"
+                         % (self.attempts, 1e3 * gap, t))
+        elif phase == PULL:
+            if t >= s.pull_time - 1e-9:
+                growth = gap - self.pull_from
+                self.last_growth = growth
+                if s.seat_pull_min <= growth <= s.seat_pull_max:
+                    self._to(REPUSH, now, "pull held at %.1f mm: seated" % (1e3 * growth))
+                else:
+                    why = "came out" if growth > s.seat_pull_max else "a barb folded against the head"
+                    self._to(BACKOFF, now, "pull stretched the pair %.1f mm (seated: %.1f-%.1f mm): %s"
+                             % (1e3 * growth, 1e3 * s.seat_pull_min, 1e3 * s.seat_pull_max, why))
+        elif phase == REPUSH:
+            if self.home_count >= s.home_steps:
+                self._to(SEATED, now, "seated (pull held at %.1f mm)" % (1e3 * self.last_growth))
+                return True
+            if t >= s.repush_timeout:
+                self._to(BACKOFF, now, "not home again after the pull (%.1f mm out)" % (1e3 * gap))
+        elif phase == BACKOFF:
+            if t >= s.backoff_time - 1e-9:
+                self._to(APPROACH, now, self.note)
+        return False
+
+    def command(self, dtheta_to_partner):
+        """The mover's (v, w) in a driven phase (None in approach and seated: the MPC decides).
+
+        ``dtheta_to_partner``: partner heading - mover heading [rad]; the mover
+        turns towards it (a pair pushed askew leaves a barb out).
+        """
+        s = self.s
+        w = max(-1.0, min(1.0, s.push_heading_gain * dtheta_to_partner))
+        if self.phase in (PUSH, REPUSH):
+            return Command(self.sign * s.push_speed, w)
+        if self.phase == PULL:
+            return Command(-self.sign * s.pull_speed, w)
+        if self.phase == BACKOFF:
+            return Command(-self.sign * s.backoff_speed, w)
+        return None
+
+    def describe(self):
+        return "%s%s" % (self.phase, " (%s)" % self.note if self.note else "")
+
+
+class SeatMonitor:
+    """Watches a coupled anchor pair: open (gap) or off its axis (lateral) for ``repair_time`` -> re-seat."""
+
+    def __init__(self, settings):
+        self.s = settings
+        self.bad_since = None
+
+    def update(self, gap, lateral, now):
+        """True when the pair has looked open or askew for ``repair_time``: it needs re-seating."""
+        s = self.s
+        if gap > s.repair_gap or abs(lateral) > s.repair_lateral:
+            if self.bad_since is None:
+                self.bad_since = now
+            return now - self.bad_since >= s.repair_time - 1e-9
+        self.bad_since = None
+        return False

@@ -1,0 +1,106 @@
+"""The docking manoeuvre's phases (puzzlebot_mpc.docking), on synthetic measurements."""
+
+import math
+
+import numpy as np
+import pytest
+
+from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_mpc import docking as dk
+from puzzlebot_mpc.pairs import ANCHOR, make_pair
+
+S = dk.DockingSettings()
+DT = 0.1
+
+
+def run(d, gaps, lateral=0.0, dtheta=0.0, t0=0.0):
+    """Feed gaps [m] one per control step; returns the step at which the pair was proven seated (or None)."""
+    for k, g in enumerate(gaps):
+        if d.update(g, lateral, dtheta, t0 + k * DT):
+            return k
+    return None
+
+
+def test_a_seated_pair_is_pushed_home_pulled_within_the_band_and_pushed_home_again():
+    d = dk.Docking(S, mover="j", now=0.0)
+    push = [0.015, 0.010, 0.005] + [0.001] * 3
+    pull = [0.001 + 0.0095 * min(1.0, k / 5) for k in range(1, 11)]       # stretches 9.5 mm, stalls
+    repush = [0.004, 0.001, 0.001, 0.001]
+    seated_at = run(d, push + pull + repush)
+    assert seated_at == len(push + pull + repush) - 1 and d.phase == dk.SEATED
+    assert "pull held at 9.5 mm" in d.note
+
+
+@pytest.mark.parametrize("growth, why", [(0.020, "came out"), (0.0075, "folded")])
+def test_a_pull_outside_the_band_backs_off_and_approaches_again(growth, why):
+    d = dk.Docking(S, now=0.0)
+    gaps = [0.015] + [0.001] * 3 + [0.001 + growth * min(1.0, k / 5) for k in range(1, 11)]
+    assert run(d, gaps) is None and d.phase == dk.BACKOFF and why in d.note
+    t = len(gaps) * DT
+    for k in range(int(S.backoff_time / DT) + 1):
+        d.update(0.02, 0.0, 0.0, t + k * DT)
+    assert d.phase == dk.APPROACH
+
+
+def test_a_push_that_does_not_get_home_backs_off_after_the_timeout():
+    d = dk.Docking(S, now=0.0)
+    n = int(S.push_timeout / DT) + 2
+    assert run(d, [0.015] + [0.011] * n) is None
+    assert d.phase == dk.BACKOFF and "did not get home" in d.note and d.attempts == 1
+
+
+def test_the_push_waits_for_a_lined_up_pair():
+    d = dk.Docking(S, now=0.0)
+    d.update(0.012, 0.004, 0.0, 0.0)                    # 4 mm off the axis: the MPC keeps aligning
+    assert d.phase == dk.APPROACH
+    d.update(0.012, 0.0, 0.3, 0.1)                      # askew
+    assert d.phase == dk.APPROACH
+    d.update(0.025, 0.0, 0.0, 0.2)                      # too far
+    assert d.phase == dk.APPROACH
+    d.update(0.012, 0.001, 0.05, 0.3)
+    assert d.phase == dk.PUSH
+
+
+@pytest.mark.parametrize("mover, sign", [("j", 1.0), ("i", -1.0)])
+def test_commands_point_into_the_partner_and_turn_to_its_heading(mover, sign):
+    d = dk.Docking(S, mover=mover, start=dk.PUSH, now=0.0)
+    c = d.command(0.1)
+    assert c.v == pytest.approx(sign * S.push_speed) and c.w == pytest.approx(S.push_heading_gain * 0.1)
+    d.phase = dk.PULL
+    assert d.command(0.0).v == pytest.approx(-sign * S.pull_speed)
+    d.phase = dk.APPROACH
+    assert d.command(0.0) is None
+
+
+def test_seat_measure_reads_gap_lateral_and_heading_off_the_poses():
+    g = RobotGeometry()
+    pair = make_pair("a", "o", ANCHOR, g)
+    pose_o = (0.1, 0.2, 0.3)
+    # a in front of o, 2 mm gap, 1 mm to o's left, turned 0.05 rad
+    c, s = math.cos(0.3), math.sin(0.3)
+    x, y = g.body_side + 0.002, 0.001
+    pose_a = (0.1 + c * x - s * y, 0.2 + s * x + c * y, 0.35)
+    gap, lat, dth = dk.seat_measure(pair, pose_a, pose_o)
+    # C_a is on a's back face: turning a moves it sideways by L/2 sin(0.05)
+    assert gap == pytest.approx(0.002 + g.body_side / 2 * (1 - math.cos(0.05)), abs=1e-9)
+    assert lat == pytest.approx(0.001 - g.body_side / 2 * math.sin(0.05), abs=1e-9)
+    assert dth == pytest.approx(0.05)
+
+
+def test_the_monitor_wants_a_reseat_only_after_the_pair_looked_open_for_a_while():
+    m = dk.SeatMonitor(S)
+    assert not m.update(0.001, 0.0, 0.0)
+    assert not m.update(0.005, 0.0, 0.1)                 # open, just now
+    assert not m.update(0.001, 0.0, 0.2)                 # closed again: forgiven
+    times = np.arange(0.3, 0.3 + S.repair_time + 0.05, DT)
+    assert [m.update(0.001, 0.003, t) for t in times][-1]     # off its axis for repair_time
+
+
+def test_bad_settings_are_clear_errors():
+    with pytest.raises(ConfigError, match="dock_push_speed"):
+        dk.DockingSettings(push_speed=-1.0).check()
+    with pytest.raises(ConfigError, match="must be below"):
+        dk.DockingSettings(seat_pull_min=0.02).check()
+    with pytest.raises(ConfigError, match="must reach past"):
+        dk.DockingSettings(pull_speed=0.005).check()
