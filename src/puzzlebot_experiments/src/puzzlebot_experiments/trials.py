@@ -400,9 +400,11 @@ def seat_pull_trial(seed, chain=3, speed=0.03, lateral=0.002, anchor_yaw=0.3, st
     dy, dyaw, ayaw = rng.uniform(-lateral, lateral), rng.uniform(-0.03, 0.03), rng.uniform(-anchor_yaw, anchor_yaw)
     starts.append(RobotStart("d", -(chain - 1) * gap0 - robot.body_side - standoff, dy, dyaw))
 
-    def gap(w):
+    def gap(w, lateral=False):
         pa, pd = w.pose2d(last), w.pose2d("d")
         c, s = math.cos(pd[2]), math.sin(pd[2])
+        if lateral:
+            return -s * (pa[0] - pd[0]) + c * (pa[1] - pd[1])
         return c * (pa[0] - pd[0]) + s * (pa[1] - pd[1]) - robot.body_side
 
     def drive(w, v, seconds):
@@ -424,5 +426,6 @@ def seat_pull_trial(seed, chain=3, speed=0.03, lateral=0.002, anchor_yaw=0.3, st
         return {"trial": "seatpull", "seed": seed, "success": gap(w) < 0.003 and repushed == HEAD_INSERTED,
                 "gap_after_push_mm": round(1e3 * home_gap, 2), "seated_after_push": pushed == HEAD_INSERTED,
                 "seated_after_repush": repushed == HEAD_INSERTED, "gap_after_repush_mm": round(1e3 * gap(w), 2),
+                "lateral_after_repush_mm": round(1e3 * gap(w, lateral=True), 2),
                 "pull_growth_mm": round(1e3 * growth, 2), "lateral_mm": round(1e3 * dy, 2),
                 "anchor_yaw_rad": round(ayaw, 3)}
