@@ -1,0 +1,123 @@
+"""``couple``: the robots form a target configuration (the paper's Algorithm 3).
+
+The target is a name (config/targets.yaml, or a generator: ``line``,
+``row``) or explicit ``slots`` (x [m], y [m], heading [rad] in the assembly
+frame), one per named robot. At the start the goal pairs follow from the
+target and the start poses (targets.assign: MST + Hungarian); every step the
+pair book picks conflict-free active pairs and updates their status
+(Algorithm 2). Succeeds when every goal pair is coupled; a goal pair lost on
+the way is a goal again. Fails after ``timeout`` s (0: none), naming the
+pairs not coupled. Status errors: per goal pair, the distance [m] between
+its connection points (NaN without poses).
+"""
+
+import numpy as np
+
+from puzzlebot_mpc import pairs as pr
+from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
+from puzzlebot_mpc.targets import TargetError, assign, resolve_target
+
+COUPLE = "couple"
+
+
+class Couple(Behavior):
+    name = COUPLE
+    needs_poses = True
+    assigns_active_pairs = True
+
+    def validate(self, poses=None):
+        """State-free: the slots and the target. With poses: poses, existing couplings, the assignment
+        (``self.assignment``)."""
+        req, robots, ctx = self.req, self.robots, self.ctx
+        if req.slots and not all(len(sl) == 3 and finite(sl) for sl in req.slots):
+            raise BehaviorError("couple: every slot must be a finite (x, y, heading)")
+        try:
+            target = resolve_target(req.target, [tuple(sl) for sl in req.slots], len(robots), ctx.targets,
+                                    ctx.geometry)
+        except TargetError as e:
+            raise BehaviorError("couple: %s" % e)
+        if len(target.slots) > len(robots):
+            raise BehaviorError("couple: target %r has %d slots but only %d robot(s) were given"
+                                % (target.name, len(target.slots), len(robots)))
+        if len(target.slots) < len(robots):
+            raise BehaviorError("couple: target %r has %d slots for %d robots; name the robots to use"
+                                % (target.name, len(target.slots), len(robots)))
+        self.need_poses(robots, poses)
+        self.assignment = None
+        if poses is None:
+            return
+        for p in ctx.pairs.coupled.values():
+            inside = [r in robots for r in p.robots]
+            if any(inside) and not all(inside):
+                raise BehaviorError("couple: %s is coupled to %s, which is not in the request; decouple it first "
+                                    "or include it" % tuple(p.robots if inside[0] else p.robots[::-1]))
+        try:
+            assignment = assign(target, robots, np.array([poses[r] for r in robots], float), ctx.geometry)
+        except TargetError as e:
+            raise BehaviorError("couple: %s" % e)
+        goal_keys = {p.key for p in assignment.pairs}
+        for p in ctx.pairs.coupled.values():
+            if p.robot_i in robots and p.key not in goal_keys:
+                raise BehaviorError("couple: %s and %s are coupled but the target assignment does not join "
+                                    "them that way; decouple them first" % p.robots)
+        self.assignment = assignment
+
+    def start(self, now, poses, static):
+        super().start(now, poses, static)
+        a = self.assignment
+        self.ctx.pairs.set_goals(a.pairs, a.priority)
+        return "goal pairs: " + ", ".join("%s->%s" % p.key for p in a.pairs)
+
+    def status(self, now, poses, newly, lost, elapsed):
+        book, a = self.ctx.pairs, self.assignment
+        keys = {p.key for p in a.pairs}
+        for p in lost:                    # a goal pair lost on the way (pulled apart) is a goal again
+            if p.key in keys and p not in book.goals:
+                p.status = pr.DECOUPLED
+                book.goals.append(p)
+        errors = []
+        for p in a.pairs:
+            pi, pj = poses.get(p.robot_i), poses.get(p.robot_j)
+            errors.append(float("nan") if pi is None or pj is None else pr.alignment_error(p, pi, pj)[0])
+        if not book.goals:
+            return Progress(SUCCEEDED, "all %d pair(s) coupled after %.2f s: %s" % (
+                len(a.pairs), elapsed, ", ".join("%s->%s" % p.key for p in a.pairs)), errors)
+        return Progress(message="%d of %d pair(s) coupled; active: %s" % (
+            len(a.pairs) - len(book.goals), len(a.pairs),
+            ", ".join(p.describe() for p in book.active) or "none"), errors=errors)
+
+    def timed_out(self, now, poses, errors, elapsed):
+        return Progress(FAILED, "timeout after %.2f s; not coupled: %s" % (
+            elapsed, ", ".join(p.describe() for p in self.ctx.pairs.goals)), errors)
+
+    def objectives(self, obj, now, poses):
+        """The single robot of an active pair docks (no rest cost); the assembly it joins holds still
+        (rest cost scaled by hold_scale), so the docking robot aligns with a target that does not move.
+
+        The seed pair (two single robots) lines up with both robots moving;
+        once its anchor head is in the opening (head_aligned) the robot that
+        is not the mover holds still while the mover pushes the anchor home
+        (otherwise the partner gives way and the pair drives off together,
+        into the robots around it).
+        """
+        ctx, hold = self.ctx, self.hold()
+        for p in ctx.pairs.active:
+            sizes = [len(ctx.assembly_of(r)) for r in p.robots]
+            seed_pushing = sizes == [1, 1] and p.status == pr.HEAD_ALIGNED
+            holder = p.robot_j if ctx.mover(p) == "i" else p.robot_i
+            for r, size in zip(p.robots, sizes):
+                if size == 1:
+                    obj.velocity_mask[ctx.index[r]] = hold if seed_pushing and r == holder else 0.0
+                else:
+                    for m in ctx.assembly_of(r):
+                        obj.velocity_mask[ctx.index[m]] = hold
+
+    def display(self, request_id, state):
+        """The target's name and its slots as placed (world frame); the MPC aligns pairs, not slot
+        positions, so only the slots' relative poses are targets."""
+        view, a = super().display(request_id, state), self.assignment
+        view.target = a.target
+        if a.slots_world is not None:
+            robot_of = {s: r for r, s in a.slot_of.items()}
+            view.slots = [(robot_of[s], tuple(float(v) for v in a.slots_world[s])) for s in sorted(robot_of)]
+        return view
