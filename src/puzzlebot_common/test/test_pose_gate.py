@@ -8,6 +8,7 @@ import pytest
 from puzzlebot_common import pose_gate as pg
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import quaternion_from_yaw, wrap_angle
+from puzzlebot_common.mocap_faults import FAULTS, clean
 from puzzlebot_common.model import unicycle_arc
 from puzzlebot_common.throttle import Throttle
 
@@ -51,56 +52,45 @@ def test_slow_streams_and_gaps_are_judged_by_their_stamps():
     assert not g.check(5.11, 1.1, 0.0, 2.0).accepted       # 0.1 m in 10 ms is not
 
 
-BAD = {   # frame fields replaced in one frame of a clean track -> expected kind
-    "jump 0.1 m": ({"dx": 0.1}, pg.JUMP),
-    "jump 1 m": ({"dx": 1.0}, pg.JUMP),
-    "jump 1000 m": ({"dx": 1000.0}, pg.OUT_OF_RANGE),
-    "x 1e300": ({"x": 1e300}, pg.OUT_OF_RANGE),
-    "x 1.7e308": ({"x": 1.7e308}, pg.OUT_OF_RANGE),
-    "heading flipped by pi": ({"dyaw": math.pi}, pg.TURN),
-    "zero quaternion": ({"q": (0.0, 0.0, 0.0, 0.0)}, pg.QUATERNION),
-    "non-unit quaternion": ({"qscale": 1.5}, pg.QUATERNION),
-    "stamp older": ({"dt": -0.5}, pg.ORDER),
-}
-for _field in ("x", "y", "z", "qx", "qy", "qz", "qw"):
-    for _value in (math.nan, math.inf, -math.inf):
-        BAD["%s = %r" % (_field, _value)] = ({_field: _value}, pg.NON_FINITE)
+def feed(g, frame):
+    """Give the gate a MocapFrame."""
+    return g.check(frame.stamp, frame.x, frame.y, quaternion=frame.q, z=frame.z)
 
 
-def feed(g, stamp, x, y, yaw, change=None):
-    """Give the gate a frame as a quaternion, with the fields of ``change`` altered."""
-    c = change or {}
-    x, y, yaw, stamp = x + c.get("dx", 0.0), y, wrap_angle(yaw + c.get("dyaw", 0.0)), stamp + c.get("dt", 0.0)
-    x, y, z = c.get("x", x), c.get("y", y), c.get("z", 0.0)
-    q = list(c.get("q", quaternion_from_yaw(yaw)))
-    q = [qi * c.get("qscale", 1.0) for qi in q]
-    for i, name in enumerate(("qx", "qy", "qz", "qw")):
-        q[i] = c.get(name, q[i])
-    return g.check(stamp, x, y, quaternion=tuple(q), z=z)
-
-
-@pytest.mark.parametrize("case", sorted(BAD))
+@pytest.mark.parametrize("fault", sorted(FAULTS))
 @pytest.mark.parametrize("burst", [1, 10])
-def test_each_bad_frame_is_rejected_named_and_the_track_kept(case, burst):
-    change, kind = BAD[case]
+def test_each_bad_frame_is_rejected_named_and_the_track_kept(fault, burst):
+    make, kind = FAULTS[fault]
     g = gate()
     frames = track(120)
     for f in frames[:50]:
-        assert feed(g, *f).accepted
+        assert feed(g, clean(*f)).accepted
     for f in frames[50:50 + burst]:
-        v = feed(g, *f, change)
-        assert not v.accepted and v.kind == kind, (case, v)
+        v = feed(g, make(*f))
+        assert not v.accepted and v.kind == kind, (fault, v)
         assert v.reason and math.isnan(v.yaw)
     assert g.held and g.counts[kind] == burst and g.last.stamp == frames[49][0]
     # the good frames that follow continue the old track at once; the hold ends after reacquire_frames
     resumed_at = None
     for k, f in enumerate(frames[50 + burst:]):
-        v = feed(g, *f)
-        assert v.accepted and not v.reacquired, (case, k, v)
+        v = feed(g, clean(*f))
+        assert v.accepted and not v.reacquired, (fault, k, v)
         if v.resumed:
             resumed_at = k
     assert resumed_at == P.reacquire_frames - 1 and not g.held
     assert g.rejected == burst and g.reacquisitions == 0
+
+
+def test_the_fault_catalogue_covers_the_issue():
+    assert len(FAULTS) == 8 + 7 * 2        # 5 jumps, a flip, 2 quaternions; NaN and inf in each field
+    assert all(kind in pg.KINDS for _, kind in FAULTS.values())
+
+
+def test_stamps_older_than_the_track_are_rejected():
+    g = gate()
+    assert g.check(1.0, 0.0, 0.0, 0.0).accepted
+    v = g.check(0.5, 0.0, 0.0, 0.0)
+    assert not v.accepted and v.kind == pg.ORDER and "older" in v.reason
 
 
 def test_a_persistent_offset_is_reacquired_after_n_consistent_frames():

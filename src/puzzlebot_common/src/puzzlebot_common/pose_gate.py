@@ -150,6 +150,7 @@ class PoseGate:
         self.last_rejection = ""                          # reason of the latest rejection
         self._good_run = 0                                # frames accepted in a row since the last rejection
         self._candidate = []                              # rejected, mutually plausible frames (a new track?)
+        self._candidate_problem = ("", "")                # (kind, reason) of the candidate's first frame
 
     @property
     def rejected(self):
@@ -187,15 +188,23 @@ class PoseGate:
                 return Verdict(True, frame.yaw, duplicate=True)
             return self._reject(ORDER, "stamp %.6f s %s the last accepted one (%.6f s)"
                                 % (frame.stamp, "repeats" if dt == 0 else "is older than", last.stamp))
-        problem = self._implausible(last, frame)
-        if problem is None:
-            return self._accept(frame)
-        # Implausible from the last accepted frame: a ghost, or the start of a new track?
-        if self._candidate and self._implausible(self._candidate[-1], frame) is not None:
-            self._candidate = []
-        self._candidate.append(frame)
+        # A frame that continues the rejected frames' track (a ghost that persists) stays on that track,
+        # even once the time since the last accepted frame would make it plausible from there: the jump
+        # happened between two frames. Otherwise a frame plausible from the last accepted one continues
+        # the robot's track, and an implausible one starts a new candidate track.
+        if self._candidate and self._implausible(self._candidate[-1], frame) is None:
+            self._candidate.append(frame)
+            kind, reason = self._candidate_problem
+            reason = "%s; %d frame(s) since continue that track (%d re-acquire it)" % (
+                reason, len(self._candidate) - 1, self.params.reacquire_frames)
+        else:
+            problem = self._implausible(last, frame)
+            if problem is None:
+                return self._accept(frame)
+            self._candidate, self._candidate_problem = [frame], problem
+            kind, reason = problem
         if len(self._candidate) < self.params.reacquire_frames:
-            return self._reject(*problem)
+            return self._reject(kind, reason)
         first = self._candidate[0]
         self._candidate = []
         self.last, self.held, self._good_run = frame, False, 0
