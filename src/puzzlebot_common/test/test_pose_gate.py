@@ -127,13 +127,15 @@ def test_inconsistent_garbage_never_becomes_the_track():
     assert g.reacquisitions == 0 and g.last.stamp == frames[19][0]
 
 
-def test_duplicates_are_accepted_conflicting_repeats_are_not():
+def test_repeated_stamps_replace_within_the_margins_and_are_rejected_beyond():
     g = gate()
     assert g.check(1.0, 0.1, 0.2, 0.3).accepted
     v = g.check(1.0, 0.1, 0.2, 0.3)
     assert v.accepted and v.duplicate and g.rejected == 0
-    v = g.check(1.0, 0.1, 0.25, 0.3)
-    assert not v.accepted and v.kind == pg.ORDER and "repeats" in v.reason
+    v = g.check(1.0, 0.1003, 0.2, 0.31)                 # a re-measurement of the instant: replaces it
+    assert v.accepted and v.duplicate and g.last.x == 0.1003
+    v = g.check(1.0, 0.1, 0.25, 0.3)                    # 5 cm away at the same instant
+    assert not v.accepted and v.kind == pg.ORDER and "repeats" in v.reason and g.last.x == 0.1003
 
 
 def test_first_frame_is_checked_too():

@@ -18,14 +18,17 @@ kind                 rule
 ``non-finite``       a field (stamp, x, y, z, yaw, a quaternion component) is NaN or inf
 ``quaternion``       the quaternion's norm differs from 1 by more than ``quaternion_tolerance``
 ``out of range``     \\|x\\|, \\|y\\| or \\|z\\| exceeds ``position_limit`` (outside any capture volume)
-``order``            the stamp is older than the last accepted frame's, or equal with other values
+``order``            the stamp is older than the last accepted frame's, or equal with a pose
+                     beyond the per-frame margins
 ``jump``             it moved farther from the last accepted frame than
                      ``speed_margin v_max dt + position_margin`` (dt: the stamps' difference)
 ``turn``             its heading turned more than ``speed_margin w_max dt + yaw_margin``
 ===================  =======================================================
 
-A repeat of the last accepted frame (same stamp, same values) is accepted as
-a duplicate (the simulation re-sends frames while it waits in lockstep).
+A frame stamped like the last accepted one is accepted as a *duplicate* if
+it lies within the per-frame margins of it (it replaces it: the simulation
+re-sends frames while it waits in lockstep, the in-process harness measures
+again at the same instant), else rejected (``order``).
 
 After a rejection the gate *holds* the robot until ``reacquire_frames``
 frames in a row were accepted: frames plausible from the last accepted one
@@ -117,7 +120,8 @@ class Verdict:
     yaw: float = math.nan        # rad, the frame's heading (from the quaternion if one was given)
     kind: str = ""               # rejection kind (KINDS), "" if accepted
     reason: str = ""             # why it was rejected, with the figures
-    duplicate: bool = False      # a repeat of the last accepted frame
+    duplicate: bool = False      # stamped like the last accepted frame (a repeat, or a re-measurement within the
+                                 # margins, which replaces it): no new instant, nothing to differentiate
     reacquired: bool = False     # accepted as the start of a new track (poses jumped: restart differences)
     resumed: bool = False        # this frame ended a hold
 
@@ -158,11 +162,13 @@ class PoseGate:
         return sum(self.counts.values())
 
     def check(self, stamp, x, y, yaw=None, quaternion=None, z=0.0):
-        """Judge one frame; ``yaw`` [rad] or ``quaternion`` (x, y, z, w) gives the heading. Never raises."""
+        """Judge one frame. The heading is ``yaw`` [rad] or, without it, the yaw of ``quaternion``
+        (x, y, z, w); a quaternion given is checked either way (finite, unit norm), so a consumer
+        that corrects the yaw (e.g. a marker offset) passes both. Never raises."""
         fields = {"stamp": stamp, "x": x, "y": y, "z": z}
         if quaternion is not None:
             fields.update(zip(("qx", "qy", "qz", "qw"), quaternion))
-        else:
+        if yaw is not None or quaternion is None:
             fields["yaw"] = yaw
         bad = [k for k, v in fields.items() if not _finite(v)]
         if bad:
@@ -173,7 +179,8 @@ class PoseGate:
             if abs(norm - 1.0) > self.params.quaternion_tolerance:
                 return self._reject(QUATERNION, "quaternion (%.4g, %.4g, %.4g, %.4g) has norm %.4g, not 1 "
                                     "(tolerance %.3g)" % (tuple(quaternion) + (norm, self.params.quaternion_tolerance)))
-            yaw = yaw_from_quaternion(*quaternion)
+            if yaw is None:
+                yaw = yaw_from_quaternion(*quaternion)
         limit = self.params.position_limit
         far = [("%s=%.4g m" % (k, v)) for k, v in (("x", x), ("y", y), ("z", z)) if abs(v) > limit]
         if far:
@@ -183,11 +190,16 @@ class PoseGate:
         if last is None:
             return self._accept(frame)
         dt = frame.stamp - last.stamp
-        if dt <= 0:
-            if dt == 0 and (frame.x, frame.y, frame.yaw) == (last.x, last.y, last.yaw):
-                return Verdict(True, frame.yaw, duplicate=True)
-            return self._reject(ORDER, "stamp %.6f s %s the last accepted one (%.6f s)"
-                                % (frame.stamp, "repeats" if dt == 0 else "is older than", last.stamp))
+        if dt < 0:
+            return self._reject(ORDER, "stamp %.6f s is older than the last accepted one (%.6f s)"
+                                % (frame.stamp, last.stamp))
+        if dt == 0:                    # a repeat, or a re-measurement of the same instant: replaces it
+            problem = self._implausible(last, frame)
+            if problem is not None:
+                return self._reject(ORDER, "stamp %.6f s repeats the last accepted one with another pose: %s"
+                                    % (frame.stamp, problem[1]))
+            self.last = frame
+            return Verdict(True, frame.yaw, duplicate=True)
         # A frame that continues the rejected frames' track (a ghost that persists) stays on that track,
         # even once the time since the last accepted frame would make it plausible from there: the jump
         # happened between two frames. Otherwise a frame plausible from the last accepted one continues
@@ -219,8 +231,8 @@ class PoseGate:
     def _implausible(self, a, b):
         """(kind, reason) if frame ``b`` cannot follow frame ``a``, else None."""
         dt = b.stamp - a.stamp
-        if dt <= 0:
-            return ORDER, "stamp %.6f s is not after %.6f s" % (b.stamp, a.stamp)
+        if dt < 0:
+            return ORDER, "stamp %.6f s is older than %.6f s" % (b.stamp, a.stamp)
         p = self.params
         dist = math.hypot(b.x - a.x, b.y - a.y)
         allowed = self.max_speed * dt + p.position_margin
