@@ -17,7 +17,10 @@ Arguments, as the launch files pass them:
 - ``robots`` (lab): the robot list file (required; every robot needs an
   ``ip_octet``); a scenario's robots must all be in it;
 - ``world`` (sim): "" = the scenario's ``world`` (default ``flat``), or a
-  world name of puzzlebot_sim (flat, step, gap).
+  world name of puzzlebot_sim (flat, step, gap);
+- ``mocap`` (sim): a mocap profile of puzzlebot_sim
+  (``puzzlebot_sim.config.mocap_profiles()``: ``ideal`` and every
+  ``config/mocap_NAME.yaml``); an unknown one (``mocap:=vikon``) is refused.
 
 Parts printed (YAML): ``robots`` -> /puzzlebot/robots, ``scenario`` ->
 /puzzlebot/scenario, ``world`` -> the sim node's ``sim/world``.
@@ -108,8 +111,20 @@ def _count(value):
     return n
 
 
-def sim_config(directory, scenario, robots="", world=""):
-    """LaunchConfig of sim.launch (see the module docstring for the arguments)."""
+def check_mocap(mocap):
+    """ConfigError unless ``mocap`` is a mocap profile of puzzlebot_sim (names the known ones)."""
+    from puzzlebot_sim.config import mocap_profiles
+
+    known = mocap_profiles()
+    if mocap not in known:
+        raise ConfigError("mocap:=%s: unknown mocap profile %r; known profiles: %s (puzzlebot_sim/config/mocap_NAME"
+                          ".yaml; ideal = exact poses)" % (mocap, mocap, ", ".join(known)))
+
+
+def sim_config(directory, scenario, robots="", world="", mocap=None):
+    """LaunchConfig of sim.launch (see the module docstring for the arguments; ``mocap`` None: not checked)."""
+    if mocap is not None:
+        check_mocap(mocap)
     if not scenario:
         raise ConfigError("scenario:= is empty; known scenarios: %s" % ", ".join(known_scenarios(directory)))
     data = load_scenario(directory, scenario)
