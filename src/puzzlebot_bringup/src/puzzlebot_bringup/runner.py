@@ -119,7 +119,7 @@ class Runner:
         end = time.monotonic() + timeout
         if rospy.get_param("/use_sim_time", False):
             try:
-                rospy.wait_for_message("/clock", Clock, timeout=timeout)
+                rospy.wait_for_message("/clock", Clock, timeout=max(0.0, end - time.monotonic()))
             except rospy.ROSException:
                 return sorted(self.pose_log)
         while not rospy.is_shutdown() and time.monotonic() < end:
