@@ -40,11 +40,18 @@ def test_robot_count_takes_the_first_robots_and_their_start_poses():
     (dict(scenario="couple4_line", robots="1"), "robots:=1 keeps pz1"),     # its decouple step names pz2
     (dict(scenario="couple2", world="moon"), "world:=moon: unknown world 'moon'; known worlds: flat, gap, step"),
     (dict(scenario="couple2", robots="/nonexistent/list.yaml"), "robot list file /nonexistent/list.yaml does not exist"),
+    (dict(scenario="couple2", mocap="vikon"), "mocap:=vikon: unknown mocap profile 'vikon'; known profiles: ideal, vicon"),
+    (dict(scenario="couple2", mocap=""), "unknown mocap profile ''"),
 ])
 def test_wrong_sim_arguments_name_the_problem(kwargs, fragment):
     with pytest.raises(ConfigError) as e:
         sim_config(SCENARIOS, **kwargs)
     assert fragment in str(e.value)
+
+
+def test_known_mocap_profiles_pass():
+    for profile in ("ideal", "vicon"):
+        assert sim_config(SCENARIOS, "couple2", mocap=profile).world == "flat"
 
 
 def test_world_comes_from_the_scenario_unless_given():

@@ -62,6 +62,7 @@ def test_sim_launch_defaults_and_options():
     ("sim", ["robots:=0"], "sim.launch: robots:=0: the robot count must be at least 1"),
     ("sim", ["scenario:=nope"], "sim.launch: unknown scenario 'nope'; known scenarios: "),
     ("sim", ["world:=moon"], "sim.launch: world:=moon: unknown world 'moon'; known worlds: flat, gap, step"),
+    ("sim", ["mocap:=vikon"], "sim.launch: mocap:=vikon: unknown mocap profile 'vikon'; known profiles: ideal, vicon"),
     ("lab", ["robots:=/nonexistent/robots.yaml"], "lab.launch: robot list file /nonexistent/robots.yaml does not exist"),
 ])
 def test_wrong_arguments_stop_roslaunch_with_one_clear_line(launch, args, message):

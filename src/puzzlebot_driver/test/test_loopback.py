@@ -9,6 +9,8 @@ import socket
 import threading
 import time
 
+from puzzlebot_common.mocap_faults import FAULTS
+
 from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_driver.emulator import EmulatedFleet, start_poses
 from puzzlebot_driver.params import driver_config, emulator_config
@@ -33,6 +35,7 @@ class Rig:
             client.on_pwm = self.recorder(name)
         self.stop = threading.Event()
         self.last_pose = {r.name: None for r in ROBOTS}
+        self.faults = {}           # robot -> (mocap_faults function, until [s]): its frames replaced meanwhile
         self.threads = [threading.Thread(target=self.rt.run, args=(self.stop.is_set,), daemon=True),
                         threading.Thread(target=self.feed, daemon=True)]
 
@@ -57,6 +60,11 @@ class Rig:
             t = time.time()
             self.fleet.advance(t, 0.01)
             for name, pose in self.fleet.mocap(t):
+                make, until = self.faults.get(name, (None, 0.0))
+                if t < until:
+                    f = make(t, *pose)
+                    self.rt.on_pose(name, f.stamp, f.x, f.y, f.q, z=f.z)
+                    continue
                 self.rt.on_pose(name, t, *pose)
                 self.last_pose[name] = t
             if k % 10 == 0:
@@ -175,3 +183,21 @@ def test_estop_latches_and_shutdown_sends_zero():
         time.sleep(0.3)
         for name in rig.received:
             assert rig.received[name][-1][1:] == (0, 0), name
+
+
+def test_bad_frames_are_logged_by_kind_and_the_robot_keeps_driving():
+    with Rig() as rig:
+        time.sleep(0.5)
+        for fault in ("x = 1.7e308", "heading flipped by pi", "zero quaternion", "translation.y = nan"):
+            rig.faults["p21"] = (FAULTS[fault][0], time.time() + 0.1)      # a burst of ~10 frames
+            time.sleep(0.3)
+        assert rig.logged("rejected pose (out of range): p21: position x=1.7e+308 m")
+        assert rig.logged("rejected pose (turn): p21: heading turned")
+        assert rig.logged("rejected pose (quaternion): p21: quaternion (0, 0, 0, 0) has norm 0")
+        assert rig.logged("rejected pose (non-finite): p21: non-finite y")
+        t = time.time()
+        time.sleep(0.3)
+        lines = rig.lines_after("p21", t)
+        assert len(lines) >= 5 and all(0 < l < 250 and 0 < r < 250 for _, l, r in lines)
+        gate = rig.rt.core.robots["p21"].gate
+        assert gate.counts["out of range"] >= 5 and gate.counts["turn"] >= 5

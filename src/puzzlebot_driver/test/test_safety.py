@@ -79,7 +79,7 @@ def test_estop_latches_until_released_and_unknown_names_are_reported():
     assert c.set_estop(False)
     assert c.tick(1.1, 1 / 30)["a0"].reason == safety.DRIVE
     assert "unknown robot" in c.on_cmd("ghost", 1.0, 0.0, 0.0)
-    assert "unknown robot" in c.on_pose("ghost", 1.0, 0.0, 0.0, 0.0)
+    assert "unknown robot" in c.on_pose("ghost", 1.0, 0.0, 0.0, 0.0).reason
 
 
 def test_stale_pose_zeroes_one_robot_and_resets_its_integrator():
@@ -102,10 +102,11 @@ def test_stale_pose_zeroes_one_robot_and_resets_its_integrator():
 
 def test_future_stamps_are_rejected_clock_check():
     c = core()
-    assert c.on_pose("a0", 10.04, 0, 0, 0, now=10.0) is None
-    msg = c.on_pose("a0", 10.5, 0, 0, 0, now=10.0)
-    assert "future" in msg and "synchronised" in msg
+    assert c.on_pose("a0", 10.04, 0, 0, 0, now=10.0).accepted
+    v = c.on_pose("a0", 10.5, 0, 0, 0, now=10.0)
+    assert not v.accepted and v.kind == "clock" and "future" in v.reason and "synchronised" in v.reason
     assert c.robots["a0"].pose[0] == 10.04
+    assert c.on_pose("a0", 10.05, 0, 0, 0, now=10.01).accepted     # the future frame did not become the track
 
 
 def test_a_robot_without_link_does_not_wind_up():

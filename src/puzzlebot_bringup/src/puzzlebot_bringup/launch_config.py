@@ -20,7 +20,10 @@ Arguments, as the launch files pass them:
   world name of puzzlebot_sim (flat, step, gap);
 - ``seed`` (sim): the run's seed; a scenario with ``scatter`` instead of
   ``start`` gets its start poses drawn from it (scenario.scatter_starts),
-  so a seed gives the same starts in sim.launch and in scenario_trials.
+  so a seed gives the same starts in sim.launch and in scenario_trials;
+- ``mocap`` (sim): a mocap profile of puzzlebot_sim
+  (``puzzlebot_sim.config.mocap_profiles()``: ``ideal`` and every
+  ``config/mocap_NAME.yaml``); an unknown one (``mocap:=vikon``) is refused.
 
 Parts printed (YAML): ``robots`` -> /puzzlebot/robots, ``scenario`` ->
 /puzzlebot/scenario, ``world`` -> the sim node's ``sim/world``.
@@ -119,8 +122,20 @@ def _scatter_check():
     return overlap_check(*load_model())
 
 
-def sim_config(directory, scenario, robots="", world="", seed=0):
-    """LaunchConfig of sim.launch (see the module docstring for the arguments)."""
+def check_mocap(mocap):
+    """ConfigError unless ``mocap`` is a mocap profile of puzzlebot_sim (names the known ones)."""
+    from puzzlebot_sim.config import mocap_profiles
+
+    known = mocap_profiles()
+    if mocap not in known:
+        raise ConfigError("mocap:=%s: unknown mocap profile %r; known profiles: %s (puzzlebot_sim/config/mocap_NAME"
+                          ".yaml; ideal = exact poses)" % (mocap, mocap, ", ".join(known)))
+
+
+def sim_config(directory, scenario, robots="", world="", seed=0, mocap=None):
+    """LaunchConfig of sim.launch (see the module docstring for the arguments; ``mocap`` None: not checked)."""
+    if mocap is not None:
+        check_mocap(mocap)
     if not scenario:
         raise ConfigError("scenario:= is empty; known scenarios: %s" % ", ".join(known_scenarios(directory)))
     data = load_scenario(directory, scenario)

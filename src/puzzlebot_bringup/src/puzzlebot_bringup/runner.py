@@ -17,6 +17,7 @@ import time
 
 import rospy
 from geometry_msgs.msg import Point, Pose2D, TransformStamped
+from rosgraph_msgs.msg import Clock
 
 from puzzlebot_common import names
 from puzzlebot_common.geometry import yaw_from_quaternion
@@ -111,6 +112,25 @@ class Runner:
             self.pose_log[name].append((msg.header.stamp.to_sec(), pose))
 
     # ---------------------------------------------------------------- setup
+    def wait_for_start(self, timeout=60.0):
+        """Wait (wall, up to ``timeout`` s) for the first /clock (under /use_sim_time) and a pose of
+        every robot: the scenario's script is timed from the simulation's clock, never from before it
+        runs. Returns the robots still without a pose (empty: all seen)."""
+        end = time.monotonic() + timeout
+        if rospy.get_param("/use_sim_time", False):
+            try:
+                rospy.wait_for_message("/clock", Clock, timeout=max(0.0, end - time.monotonic()))
+            except rospy.ROSException:
+                return sorted(self.pose_log)
+        while not rospy.is_shutdown() and time.monotonic() < end:
+            with self.lock:
+                missing = sorted(n for n, log in self.pose_log.items() if not log)
+            if not missing:
+                return []
+            time.sleep(POLL)
+        with self.lock:
+            return sorted(n for n, log in self.pose_log.items() if not log)
+
     def connect(self, service_timeout=120.0, control_timeout=60.0):
         """Wait for the MPC's service and its first solved step (it then has poses: couple needs them).
         Returns False if no step was solved within ``control_timeout`` s (wall)."""
@@ -137,6 +157,10 @@ class Runner:
         StepResult for a step the MPC refused (the steps after it are not sent)."""
         out = []
         start = max(rospy.get_time() + start_delay, SCRIPT_START if start_delay > 0 else 0.0)
+        if start_delay > 0 and start > SCRIPT_START + 1e-6 and rospy.get_param("/use_sim_time", False):
+            rospy.logwarn("the script starts at t = %.2f s, not %.1f s: this runner came up after the simulation "
+                          "had run %.2f s, so runs of the same seed that started in time differ from this one"
+                          % (start, SCRIPT_START, start - start_delay))
         for k, step in enumerate(steps):
             req = step_request(step)
             req.queue, req.start_time = k > 0, start if k == 0 and start_delay > 0 else 0.0

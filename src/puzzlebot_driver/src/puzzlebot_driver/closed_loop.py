@@ -34,10 +34,13 @@ class Trace:
 
 
 def run(robots, driver_config, emulator_config, commands, duration, starts=None,
-        mocap_muted: Optional[Callable[[str, float], bool]] = None, cmd_rate=10.0) -> Dict[str, Trace]:
+        mocap_muted: Optional[Callable[[str, float], bool]] = None, cmd_rate=10.0,
+        mocap_fault: Optional[Callable] = None) -> Dict[str, Trace]:
     """Simulate ``duration`` s. ``commands(t)`` -> {name: (v, w)} is sent as cmd_vel
     at ``cmd_rate`` Hz (like the MPC); ``mocap_muted(name, t)`` -> True hides a
-    robot's mocap pose at t. Returns a Trace per robot."""
+    robot's mocap pose at t; ``mocap_fault(name, t, (x, y, yaw))`` -> a
+    puzzlebot_common.mocap_faults.MocapFrame replaces the measured pose at t
+    (None: the pose as measured). Returns a Trace per robot."""
     ep = emulator_config.params
     core = DriverCore(robots, driver_config)
     import numpy as np
@@ -61,7 +64,12 @@ def run(robots, driver_config, emulator_config, commands, duration, starts=None,
         if k % pose_every == 0:
             for name, robot in emu.items():
                 if mocap_muted is None or not mocap_muted(name, t):
-                    core.on_pose(name, t, *robot.measured_pose(ep.noise_xy, ep.noise_yaw))
+                    pose = robot.measured_pose(ep.noise_xy, ep.noise_yaw)
+                    frame = mocap_fault(name, t, pose) if mocap_fault is not None else None
+                    if frame is None:
+                        core.on_pose(name, t, *pose)
+                    else:
+                        core.on_pose(name, frame.stamp, frame.x, frame.y, frame.q, z=frame.z)
         if t + 1e-9 >= next_tick:
             decisions = core.tick(t, period if last_tick is None else t - last_tick)
             last_tick = t

@@ -13,6 +13,9 @@ factor (the turn ratio is kept). Anti-windup: the integrators are clamped to
 ``i_max_v`` / ``i_max_w`` and do not integrate while the output is saturated
 in the direction that would grow the error. Without a velocity estimate
 (the first poses) only the feed-forward acts.
+
+Nothing non-finite reaches ``round()``: a non-finite input or output gives
+PWM 0 with ``invalid`` set (and the integrators reset); the caller logs it.
 """
 
 import math
@@ -24,6 +27,11 @@ class WheelCommand:
     left: int                # PWM, -pwm_max..pwm_max
     right: int
     saturated: bool = False  # the output was scaled down to pwm_max
+    invalid: str = ""        # why the output is zero instead (non-finite input or output), "" if valid
+
+
+def _finite(*xs):
+    return all(math.isfinite(x) for x in xs)
 
 
 def _clamp(x, limit):
@@ -54,6 +62,10 @@ class WheelController:
     def step(self, v_cmd, w_cmd, estimate, dt):
         """One loop step; ``estimate`` is (v_est, w_est) or None; dt [s] since the last step."""
         g = self.gains
+        if not _finite(v_cmd, w_cmd, dt) or (estimate is not None and not _finite(*estimate)):
+            self.reset()
+            return WheelCommand(0, 0, invalid="non-finite input (cmd %r, %r, estimate %r, dt %r)"
+                                % (v_cmd, w_cmd, estimate, dt))
         if estimate is None:
             e_v = e_w = 0.0
         else:
@@ -61,6 +73,10 @@ class WheelController:
         v_out = v_cmd + g.kp_v * e_v + self.i_v
         w_out = w_cmd + g.kp_w * e_w + self.i_w
         left, right = self.pwm(v_out, w_out)
+        if not _finite(left, right):
+            self.reset()
+            return WheelCommand(0, 0, invalid="non-finite PWM (%r, %r) from v_out %r, w_out %r"
+                                % (left, right, v_out, w_out))
         peak = max(abs(left), abs(right))
         saturated = peak > g.pwm_max
         if saturated:

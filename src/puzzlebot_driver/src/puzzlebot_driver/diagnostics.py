@@ -1,13 +1,15 @@
 """Content of the driver's diagnostics (diagnostic_msgs), without ROS.
 
-One status per robot -- mocap rate and age, link state, last PWM and why,
-command and estimate -- and one for the loop (achieved rate and jitter).
+One status per robot -- mocap rate and age, the pose gate's state and
+rejection counts, link state, last PWM and why, command and estimate -- and
+one for the loop (achieved rate and jitter).
 The node turns these into a diagnostic_msgs/DiagnosticArray on /diagnostics.
 """
 
 from dataclasses import dataclass, field
 from typing import List, Tuple
 
+from puzzlebot_common.pose_gate import KINDS
 from puzzlebot_driver import safety
 
 # diagnostic_msgs/DiagnosticStatus levels
@@ -63,6 +65,16 @@ def robot_status(state, link, estimate, now, params, loop_rate=None, prefix="puz
         ("est w [rad/s]", _fmt(est[1], "%.4f")),
         ("rejected commands", str(state.rejected_commands)),
         ("rejected poses", str(state.rejected_poses)),
+    ]
+    gate = state.gate
+    if gate is not None:
+        values.append(("pose gate", "holding (%s)" % gate.last_rejection if gate.held else "tracking"))
+        values += [("rejected poses: %s" % kind, str(gate.counts[kind])) for kind in KINDS]
+        values += [("rejected poses: clock", str(state.clock_rejections)),
+                   ("pose re-acquisitions", str(gate.reacquisitions)),
+                   ("last pose rejection", gate.last_rejection)]
+    values += [
+        ("loop faults (PWM 0)", str(state.loop_faults)),
         ("pilot", str(state.pilot).lower()),
         ("loop rate [Hz]", _fmt(loop_rate, "%.2f")),
     ]

@@ -66,7 +66,11 @@ class VelocityEstimator:
         half = 0.5 * dth
         arc = 1.0 if abs(half) < 1e-6 else half / math.sin(half)
         v_raw, w_raw = forward * arc / dt, dth / dt
-        self.lateral = (-(x - x0) * math.sin(mid) + (y - y0) * math.cos(mid)) / dt
+        lateral = (-(x - x0) * math.sin(mid) + (y - y0) * math.cos(mid)) / dt
+        if not (math.isfinite(v_raw) and math.isfinite(w_raw) and math.isfinite(lateral)):
+            self.reset()
+            return "non-finite velocity from the poses at %r and %r s: estimate restarted" % (t0, stamp)
+        self.lateral = lateral
         if self._v is None or self.tau <= 0:
             self._v, self._w = v_raw, w_raw
         else:

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.params import from_mapping, require_positive
+from puzzlebot_common.pose_gate import PoseGateParams
 from puzzlebot_driver.protocol import PWM_LIMIT
 
 
@@ -121,6 +122,7 @@ class DriverConfig:
     params: DriverParams
     gains: dict          # robot name -> ControlGains
     unused_overrides: tuple = ()   # names under ``robots`` that are not in the robot list
+    pose_gate: PoseGateParams = PoseGateParams()   # margins of the mocap pose gate (~pose_gate)
 
 
 def _mapping(data, where):
@@ -131,8 +133,12 @@ def _mapping(data, where):
     return data
 
 
-def driver_config(data, robots, where="driver"):
+def driver_config(data, robots, where="driver", pose_gate=PoseGateParams()):
     """Parse the ``driver`` mapping for a parsed robot list (puzzlebot_common.robots).
+
+    ``pose_gate``: the pose gate's margins (puzzlebot_common/config/pose_gate.yaml,
+    parsed by the caller); the gate's speed and turn-rate bounds are
+    ``v_limit`` and ``w_limit`` times its ``speed_margin``.
 
     Raises ConfigError naming the key on any malformed entry and if a robot
     of the list has no ``ip_octet`` (the driver could not tell its link).
@@ -162,7 +168,7 @@ def driver_config(data, robots, where="driver"):
             source = "%s.robots.%s" % (where, spec.name)
         gains[spec.name] = ControlGains.from_dict(values, source)
     unused = tuple(sorted(str(k) for k in set(per_robot) - {s.name for s in robots}))
-    return DriverConfig(params, gains, unused)
+    return DriverConfig(params, gains, unused, pose_gate)
 
 
 # ----------------------------------------------------------------------------- emulator

@@ -11,6 +11,8 @@ node, wall time in the lab).
 import threading
 import time
 
+from puzzlebot_common.throttle import Throttle
+from puzzlebot_driver import safety
 from puzzlebot_driver.diagnostics import loop_status, robot_status
 from puzzlebot_driver.driver import DriverCore, LoopStats
 from puzzlebot_driver.link import PwmServer
@@ -32,6 +34,7 @@ class DriverRuntime:
         self.late_ticks = 0
         self._late_logged = -1e9
         self._old_logged = {}
+        self.throttle = Throttle(config.pose_gate.log_period)   # per robot and kind: rejections, loop faults
 
     def start(self):
         """Listen for robots (raises link.LinkError if the port cannot be used)."""
@@ -39,18 +42,35 @@ class DriverRuntime:
         return self
 
     # ------------------------------------------------------------------ inputs
-    def on_pose(self, name, stamp, x, y, yaw):
-        """A mocap pose (stamp = measurement time); None if accepted, else why not."""
+    def on_pose(self, name, stamp, x, y, heading, z=0.0):
+        """A mocap pose (stamp = measurement time; ``heading``: yaw [rad] or quaternion (x, y, z, w)).
+
+        Returns the pose gate's Verdict. Rejections are logged, at most one
+        line per robot, kind and ``pose_gate.log_period``; re-acquisitions
+        and the end of a hold at info level.
+        """
         now = self.clock()
         with self.lock:
-            reason = self.core.on_pose(name, stamp, x, y, yaw, now)
+            verdict = self.core.on_pose(name, stamp, x, y, heading, now, z=z)
+        if not verdict.accepted:
+            line = self.throttle(("pose", name, verdict.kind), "rejected pose (%s): %s" % (verdict.kind, verdict.reason))
+            if line:
+                self.log("warn", line)
+            return verdict
+        if verdict.reacquired:
+            self.log("warn", "pose %s" % verdict.reason)
+        elif verdict.resumed:
+            line = self.throttle(("resumed", name), "pose of %s plausible again for %d frames in a row"
+                                 % (name, self.core.robots[name].gate.params.reacquire_frames))
+            if line:
+                self.log("info", line)
         age = now - stamp
-        if reason is None and age > self.params.pose_timeout and now - self._old_logged.get(name, -1e9) > 5.0:
+        if age > self.params.pose_timeout and now - self._old_logged.get(name, -1e9) > 5.0:
             self._old_logged[name] = now
             self.log("warn", "pose of %s is %.3f s old on arrival (pose_timeout %.3f s): it is stale before it "
                              "is used; is the mocap clock synchronised with this machine?"
                      % (name, age, self.params.pose_timeout))
-        return reason
+        return verdict
 
     def on_cmd(self, name, v, w):
         with self.lock:
@@ -74,6 +94,11 @@ class DriverRuntime:
                 return None
             decisions = self.core.tick(now, dt, set(self.server.connected_names()))
             sent = {name: self.server.send(name, d.left, d.right) for name, d in decisions.items()}
+        for name, d in decisions.items():
+            if d.detail:
+                line = self.throttle(("loop", name, d.reason), "%s: PWM 0 (%s): %s" % (name, d.reason, d.detail))
+                if line:
+                    self.log("error" if d.reason == safety.INTERNAL_ERROR else "warn", line)
         return now, decisions, sent
 
     def run(self, should_stop, on_tick=None, on_diagnostics=None):

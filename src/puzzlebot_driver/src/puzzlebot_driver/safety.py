@@ -18,6 +18,16 @@ reason               rule
 ``drive``            none of the above: the velocity loop runs
 ===================  =======================================================
 
+While driving, the loop itself falls back to zero (driver.DriverCore.tick):
+
+=====================  =====================================================
+``estimate invalid``   the velocity estimate is non-finite or beyond the pose gate's
+                       speed / turn-rate bounds (the estimate restarts)
+``output invalid``     the PWM came out non-finite (never sent, never rounded)
+``internal error``     the robot's step raised an arithmetic or value error (logged; the
+                       other robots are served)
+=====================  =====================================================
+
 Every reason but ``drive`` means PWM 0 on both wheels and a reset of the
 robot's integrators.
 """
@@ -33,6 +43,9 @@ COMMAND_REJECTED = "command rejected"
 COMMAND_STALE = "command stale"
 STOP = "stop"
 DRIVE = "drive"
+ESTIMATE_INVALID = "estimate invalid"
+OUTPUT_INVALID = "output invalid"
+INTERNAL_ERROR = "internal error"
 
 
 def check_command(v, w, params):

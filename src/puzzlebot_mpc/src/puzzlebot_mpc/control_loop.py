@@ -10,10 +10,13 @@ the active pairs (Algorithm 2) and the coupled-pair watchdog, then the
 conflict-free choice of active pairs, before the MPC solve.
 
 Safety rules, applied every step:
-- a non-finite pose, a pose for an unknown robot or one older than the last
-  accepted sample is rejected (the caller logs the returned reason);
-- a robot without a pose newer than ``settings.pose_timeout`` is commanded
-  to zero and left out of its behaviour until fresh poses return;
+- every pose passes the robot's pose gate (puzzlebot_common.pose_gate, bounds
+  ``hardware_v_max`` / ``hardware_w_max``): a non-finite or implausible pose,
+  a pose for an unknown robot or one older than the last accepted sample is
+  rejected (the caller logs the returned reason);
+- a robot without a pose newer than ``settings.pose_timeout``, or held by its
+  gate (a rejection in the last ``reacquire_frames`` frames), is commanded to
+  zero and left out of its behaviour and of new pairs until trusted poses return;
 - a failed solve commands zero to every robot (``fallback == "stop"``), open-loop
   commands (the decoupling wiggle) included.
 """
@@ -25,6 +28,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_common.pose_gate import PoseGate, PoseGateParams, Verdict
 from puzzlebot_mpc.behaviors import FAILED, RUNNING, BehaviorError, BehaviorManager
 from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
@@ -44,31 +48,44 @@ class PoseSample:
 
 
 class PoseBook:
-    """Latest accepted pose of each robot."""
+    """Latest accepted pose of each robot, every frame through its pose gate (puzzlebot_common.pose_gate).
 
-    def __init__(self, names, timeout):
+    A robot is *fresh* when its latest accepted pose is at most ``timeout``
+    old and its gate does not hold it (no rejection in the last
+    ``reacquire_frames`` frames): the controller plans only with those.
+    """
+
+    def __init__(self, names, timeout, v_max, w_max, gate_params=PoseGateParams()):
+        """``v_max`` [m/s], ``w_max`` [rad/s]: the robots' own limits (settings.hardware_v_max, hardware_w_max)."""
         self.timeout = timeout
         self._poses: Dict[str, Optional[PoseSample]] = {n: None for n in names}
+        self.gates = {n: PoseGate(n, v_max, w_max, gate_params) for n in names}
+        self.last_verdict: Dict[str, Optional[Verdict]] = {n: None for n in names}
 
-    def update(self, name, stamp, x, y, yaw):
-        """Store a sample; return None if accepted, else the reason it was rejected."""
+    def update(self, name, stamp, x, y, yaw, quaternion=None, z=0.0):
+        """Judge a sample (``yaw`` [rad]; the ``quaternion`` (x, y, z, w) it came from and the height
+        ``z`` [m], if given, are checked too); store it if accepted. Return None if accepted, else
+        the reason it was rejected."""
         if name not in self._poses:
             return "pose for unknown robot %r" % name
-        if not all(math.isfinite(v) for v in (stamp, x, y, yaw)):
-            return "non-finite pose for %s: (%r, %r, %r) at %r" % (name, x, y, yaw, stamp)
-        last = self._poses[name]
-        if last is not None and stamp < last.stamp:
-            return "pose for %s is older (%.3f s) than the last one (%.3f s)" % (name, stamp, last.stamp)
-        self._poses[name] = PoseSample(stamp, x, y, yaw)
+        verdict = self.gates[name].check(stamp, x, y, yaw, quaternion, z)
+        self.last_verdict[name] = verdict
+        if not verdict.accepted:
+            return "%s: %s" % (name, verdict.reason)
+        self._poses[name] = PoseSample(float(stamp), float(x), float(y), float(verdict.yaw))
         return None
 
     def latest(self, name):
         return self._poses[name]
 
+    def held(self, name):
+        """True while the robot's pose gate holds it (recent rejections)."""
+        return self.gates[name].held
+
     def fresh(self, name, now):
-        """(x, y, yaw) if the latest sample is at most ``timeout`` old, else None."""
+        """(x, y, yaw) if the latest sample is at most ``timeout`` old and not held, else None."""
         p = self._poses[name]
-        if p is None or now - p.stamp > self.timeout:
+        if p is None or now - p.stamp > self.timeout or self.gates[name].held:
             return None
         return (p.x, p.y, p.yaw)
 
@@ -88,11 +105,13 @@ class StepOutput:
 class ControlLoop:
     """Poses in, behaviour objectives, MPC solve, commands out."""
 
-    def __init__(self, robot_names, settings, geometry=None, targets=None, actuator_model=None):
+    def __init__(self, robot_names, settings, geometry=None, targets=None, actuator_model=None,
+                 pose_gate=PoseGateParams()):
         self.names = list(robot_names)
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
-        self.poses = PoseBook(self.names, settings.pose_timeout)
+        self.poses = PoseBook(self.names, settings.pose_timeout, settings.hardware_v_max, settings.hardware_w_max,
+                              pose_gate)
         self.pairs = PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating())
         self.behaviors = BehaviorManager(self.names, settings, self.geometry, self.pairs, targets)
         self._pending = []              # (request id, BehaviorRequest) waiting to start, in order
@@ -101,10 +120,10 @@ class ControlLoop:
         # Identified actuator effects (effects.ActuatorModel), None = plain unicycle: see compensation.py.
         self.compensation = Compensation.create(actuator_model, self.names, settings)
 
-    def on_pose(self, name, stamp, x, y, yaw):
+    def on_pose(self, name, stamp, x, y, yaw, quaternion=None, z=0.0):
         if self.compensation is not None:      # actuator model: measured yaw -> body heading
             yaw = self.compensation.body_yaw(yaw)
-        return self.poses.update(name, stamp, x, y, yaw)
+        return self.poses.update(name, stamp, x, y, yaw, quaternion, z)
 
     def fresh_poses(self, now):
         return {name: self.poses.fresh(name, now) for name in self.names}
