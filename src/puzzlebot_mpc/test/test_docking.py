@@ -63,14 +63,17 @@ def test_the_push_waits_for_a_lined_up_pair():
 
 
 @pytest.mark.parametrize("mover, sign", [("j", 1.0), ("i", -1.0)])
-def test_commands_point_into_the_partner_and_turn_to_its_heading(mover, sign):
+def test_commands_point_into_the_partner_and_hold_its_heading_at_the_start(mover, sign):
     d = dk.Docking(S, mover=mover, start=dk.PUSH, now=0.0)
-    c = d.command(0.1)
+    c = d.command(0.2, 0.3)                     # mover heading, partner heading
     assert c.v == pytest.approx(sign * S.push_speed) and c.w == pytest.approx(S.push_heading_gain * 0.1)
-    d.phase = dk.PULL
-    assert d.command(0.0).v == pytest.approx(-sign * S.pull_speed)
-    d.phase = dk.APPROACH
-    assert d.command(0.0) is None
+    c = d.command(0.2, 0.6)                     # the contact turns the partner: the push keeps its course
+    assert c.w == pytest.approx(S.push_heading_gain * 0.1)
+    d._to(dk.PULL, 1.0)
+    c = d.command(0.2, 0.6)                     # a new phase takes the partner's heading again
+    assert c.v == pytest.approx(-sign * S.pull_speed) and c.w == pytest.approx(S.push_heading_gain * 0.4)
+    d._to(dk.APPROACH, 2.0)
+    assert d.command(0.0, 0.0) is None
 
 
 def test_seat_measure_reads_gap_lateral_and_heading_off_the_poses():
@@ -94,7 +97,20 @@ def test_the_monitor_wants_a_reseat_only_after_the_pair_looked_open_for_a_while(
     assert not m.update(0.005, 0.0, 0.1)                 # open, just now
     assert not m.update(0.001, 0.0, 0.2)                 # closed again: forgiven
     times = np.arange(0.3, 0.3 + S.repair_time + 0.05, DT)
-    assert [m.update(0.001, 0.003, t) for t in times][-1]     # off its axis for repair_time
+    assert [m.update(0.001, 0.004, t) for t in times][-1]     # off its axis for repair_time
+
+
+def test_a_jammed_push_aims_the_next_approach_to_the_side_it_was_pushed():
+    d = dk.Docking(S, start=dk.PUSH, now=0.0)
+    n = int(S.push_timeout / DT) + 2
+    run(d, [0.011] * n, lateral=0.006)               # pushed aside: the partner's C_a 6 mm to the left
+    assert d.phase == dk.BACKOFF and d.aim == pytest.approx(-S.aim_step)
+    assert not d.ready_to_push(0.012, 0.0, 0.0)       # the approach must now bring C_a across the axis ...
+    assert d.ready_to_push(0.012, -S.aim_step, 0.0)   # ... to the aim
+    for k in range(5):
+        d._to(dk.PUSH, 10.0 + k)
+        d.update(0.011, 0.006, 0.0, 10.0 + k + S.push_timeout)
+    assert d.aim == pytest.approx(-S.aim_max)         # never further than aim_max
 
 
 def test_bad_settings_are_clear_errors():

@@ -15,15 +15,23 @@ phase      what the mover (the robot that docks) does
 =========  ==============================================================
 approach   the MPC aligns the pair (alignment cost, approach carrot)
 push       drives straight into the partner at ``push_speed``, holding
-           the partner's heading (the mouth and the anchor's free yaw do
-           the last millimetres); "home" when the gap between the faces is
-           below ``home_gap`` for ``home_steps`` steps
+           the heading the partner had when the push began (the mouth and
+           the anchor's free yaw do the last millimetres; chasing a partner
+           that the contact turns would turn the pair together); "home"
+           when the gap between the faces is below ``home_gap`` for
+           ``home_steps`` steps
 pull       backs away at ``pull_speed`` for ``pull_time``: the gap must
            grow by ``seat_pull_min`` .. ``seat_pull_max`` (the seated band)
-repush     drives home again (the pull leaves the anchor part way out)
+repush     drives home again at ``repush_speed`` (the pull leaves the anchor
+           part way out, its barbs behind the lips: a gentle push seats it,
+           a hard one can knock a barb out again)
 backoff    backs away at ``backoff_speed`` for ``backoff_time``, then
            approaches again: after a push that did not get home
-           (``push_timeout``) or a pull outside the band
+           (``push_timeout``) or a pull outside the band. A push that jams
+           leaves the mover pushed aside by the head, towards the side the
+           head sits on (the anchor turns freely in its holder, so the head
+           is not where the partner's pose puts it): the next approach aims
+           the mouth ``aim_step`` further to that side (up to ``aim_max``)
 seated     the pair is coupled (the controller's head_inserted)
 =========  ==============================================================
 
@@ -60,7 +68,7 @@ DRIVEN = (PUSH, PULL, REPUSH, BACKOFF)
 class DockingSettings:
     """How a pair is pushed home, tested and re-seated (MPCSettings ``dock_*``; units m, s, rad)."""
 
-    push_speed: float = 0.03          # m/s: straight push into the partner
+    push_speed: float = 0.05          # m/s: straight push into the partner (faster folds the barbs surer: 40/40 vs 38/40)
     push_heading_gain: float = 2.0    # 1/s: w = gain x (partner heading - mover heading) while pushing/pulling
     push_start_gap: float = 0.016     # m: the push starts once the faces are this close ...
     push_lateral: float = 0.0025      # m: ... with C_a this close to the opening's axis ...
@@ -72,10 +80,13 @@ class DockingSettings:
     pull_time: float = 1.0            # s
     seat_pull_min: float = 0.0085     # m: a seated pair stretches at least this much under the pull ...
     seat_pull_max: float = 0.0135     # m: ... and at most this much
+    repush_speed: float = 0.02        # m/s: the push home after the pull
     repush_timeout: float = 1.5       # s: back home after the pull within this
     backoff_speed: float = 0.03       # m/s
     backoff_time: float = 0.8         # s
-    repair_lateral: float = 0.0015    # m: a coupled pair with C_a this far off the opening's axis ...
+    aim_step: float = 0.002           # m: after a jammed push, aim the mouth this much further to the side
+    aim_max: float = 0.004            # m: ... up to this far off the partner's axis
+    repair_lateral: float = 0.0035    # m: a coupled pair with C_a this far off the opening's axis ...
     repair_gap: float = 0.003         # m: ... or its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
@@ -130,10 +141,13 @@ class Docking:
         self.pull_from = None         # gap when the pull started [m]
         self.last_growth = None       # stretch measured by the last pull [m]
         self.note = ""                # why the last phase change happened
+        self.aim = 0.0                # m: where the approach puts C_a across the opening's axis (j's frame, +y)
+        self.heading_ref = None       # rad: the heading a driven phase holds (the partner's at its start)
 
     # ------------------------------------------------------------ helpers
     def _to(self, phase, now, note=""):
         self.phase, self.since, self.home_count, self.note = phase, now, 0, note
+        self.heading_ref = None
         if phase == PUSH:
             self.attempts += 1
 
@@ -148,12 +162,14 @@ class Docking:
     def ready_to_push(self, gap, lateral, dtheta):
         """The approach has brought the pair close and lined up enough for a straight push."""
         s = self.s
-        return gap <= s.push_start_gap and abs(lateral) <= s.push_lateral and abs(dtheta) <= s.push_yaw
+        return gap <= s.push_start_gap and abs(lateral - self.aim) <= s.push_lateral and abs(dtheta) <= s.push_yaw
 
     # -------------------------------------------------------------- update
     def update(self, gap, lateral, dtheta, now):
         """Advance the phase from this step's measurement (seat_measure). Returns True when the pair has
         just been proven seated."""
+        if self.since is None:           # the first update of this phase (the pair was waiting its turn)
+            self.since = now
         s, phase, t = self.s, self.phase, self._elapsed(now)
         home = gap <= s.home_gap
         self.home_count = self.home_count + 1 if home else 0
@@ -165,8 +181,9 @@ class Docking:
                 self._to(PULL, now, "pushed home")
                 self.pull_from = gap
             elif t >= s.push_timeout:
-                self._to(BACKOFF, now, "push %d did not get home (%.1f mm out after %.1f s)"
-                         % (self.attempts, 1e3 * gap, t))
+                self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+                self._to(BACKOFF, now, "push %d did not get home (%.1f mm out, pushed %.1f mm aside after %.1f s); "
+                         "aiming %.1f mm across" % (self.attempts, 1e3 * gap, 1e3 * lateral, t, 1e3 * self.aim))
         elif phase == PULL:
             if t >= s.pull_time - 1e-9:
                 growth = gap - self.pull_from
@@ -188,16 +205,20 @@ class Docking:
                 self._to(APPROACH, now, self.note)
         return False
 
-    def command(self, dtheta_to_partner):
+    def command(self, mover_heading, partner_heading):
         """The mover's (v, w) in a driven phase (None in approach and seated: the MPC decides).
 
-        ``dtheta_to_partner``: partner heading - mover heading [rad]; the mover
-        turns towards it (a pair pushed askew leaves a barb out).
+        Headings [rad], world frame. The mover holds the heading its partner
+        had at the start of the phase (a pair pushed askew leaves a barb out).
         """
         s = self.s
-        w = max(-1.0, min(1.0, s.push_heading_gain * dtheta_to_partner))
-        if self.phase in (PUSH, REPUSH):
+        if self.heading_ref is None:
+            self.heading_ref = partner_heading
+        w = max(-1.0, min(1.0, s.push_heading_gain * math.remainder(self.heading_ref - mover_heading, 2 * math.pi)))
+        if self.phase == PUSH:
             return Command(self.sign * s.push_speed, w)
+        if self.phase == REPUSH:
+            return Command(self.sign * s.repush_speed, w)
         if self.phase == PULL:
             return Command(-self.sign * s.pull_speed, w)
         if self.phase == BACKOFF:
