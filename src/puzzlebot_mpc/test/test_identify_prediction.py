@@ -109,10 +109,9 @@ def test_metric_of_the_true_model_on_noise_free_data_is_zero():
     settings = IdentifySettings()
     robot, _ = noise_free_robot(ALL)
     model = synth.model_of(ALL)
-    fit, val = engine.fit_and_validation_windows(robot, settings)
-    for w in (fit, val):
-        ep, ey = engine.errors(model.all_params(), robot, w)
-        assert np.max(np.abs(ep)) < 1e-5 and np.max(np.abs(ey)) < 1e-6
+    val = engine.robot_windows(robot, settings)
+    ep, ey = engine.errors(model.all_params(), robot, val)
+    assert np.max(np.abs(ep)) < 1e-5 and np.max(np.abs(ey)) < 1e-6
     ep, _ = engine.errors(ActuatorModel().all_params(), robot, val)
     assert np.sqrt(np.mean(np.abs(ep) ** 2)) > 1e-3                  # the nominal model is wrong
 
@@ -122,12 +121,13 @@ def test_metric_agrees_with_actuator_state_and_predict():
     settings = IdentifySettings()
     robot, cmds = noise_free_robot(ALL, seed=4)
     model = synth.model_of(ALL)
-    _, val = engine.fit_and_validation_windows(robot, settings)
+    val = engine.robot_windows(robot, settings)
     pos, yaw = engine.predict(model.all_params(), robot, val)
     for i in range(0, len(val), 37):
         ts, te = val.ts[i], val.te[i]
         state = actuator_state(model, cmds, ts, history_s=settings.history_s)
         pose0 = (val.p_start[i].real, val.p_start[i].imag, val.yaw_start[i])
-        out = predict(model, pose0, state, [c for c in cmds if c[0] <= te], te - ts, 1, max_substep=0.005)
+        out = predict(model, pose0, state, [c for c in cmds if c[0] <= te], te - ts, 1, max_substep=0.005,
+                      t_start=robot.t_start)
         assert abs(out[1, 0] + 1j * out[1, 1] - pos[i]) < 1e-5
         assert abs(math.remainder(out[1, 2] - yaw[i], 2 * math.pi)) < 1e-6
