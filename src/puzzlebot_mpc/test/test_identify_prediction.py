@@ -102,7 +102,7 @@ def noise_free_robot(effects, seed=3, duration=40.0):
                            drop=0.0)
     r = rec["pz1"]
     t, v, w = (np.array(c) for c in zip(*r["cmd"]))
-    return RobotData("pz1", r["t"], r["x"], r["y"], r["yaw"], t, v, w), r["cmd"]
+    return RobotData("pz1", r["t"], r["x"], r["y"], r["yaw"], t, v, w, t_start=float(r["t"][0])), r["cmd"]
 
 
 def test_metric_of_the_true_model_on_noise_free_data_is_zero():

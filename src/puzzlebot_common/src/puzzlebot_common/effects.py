@@ -563,13 +563,7 @@ def _limited_integrals(u, tau, a, p, t0, dt, n, x0):
     seg_t0 = start_t[first]
     seg_len = np.append(seg_t0[1:], t0 + n * dt) - seg_t0
     seg_u = u[first]
-    y0 = np.empty(first.size)
-    ramp = np.empty(first.size)
-    y = float(x0)
-    for i, (uu, L) in enumerate(zip(seg_u.tolist(), seg_len.tolist())):
-        r = _ramp_time(uu - y, tau, a)
-        y0[i], ramp[i] = y, r
-        y = _response(y, uu, tau, a, L)[2]
+    y0, ramp = _segment_starts(seg_u.tolist(), seg_len.tolist(), float(x0), tau, a)
     sign = np.sign(seg_u - y0)
     sa = start_t - seg_t0[seg]
     f0a, f1a = _segment_integrals(sa, y0[seg], seg_u[seg], ramp[seg], sign[seg], tau, a)
@@ -577,6 +571,31 @@ def _limited_integrals(u, tau, a, p, t0, dt, n, x0):
     d0 = f0b - f0a
     d1 = f1b - f1a + (seg_t0[seg] - (t0 + dt * k)) * d0      # moment about the interval's start
     return np.bincount(k, d0, minlength=n)[:n], np.bincount(k, d1, minlength=n)[:n]
+
+
+def _segment_starts(us, lengths, y, tau, a):
+    """The lagged velocity at the start of each segment (constant target us[i] for lengths[i] s) and
+    how long it stays saturated there: the sequential part of _limited_integrals (a tight loop; the
+    same arithmetic as _response)."""
+    n = len(us)
+    y0, ramp = [0.0] * n, [0.0] * n
+    atau = a * tau
+    exp = math.exp
+    for i in range(n):
+        u, L = us[i], lengths[i]
+        y0[i] = y
+        e = u - y
+        ae = e if e >= 0.0 else -e
+        if ae > atau:
+            r = (ae - atau) / a
+            ramp[i] = r
+            if L <= r:
+                y += a * L if e > 0.0 else -a * L
+                continue
+            y = u - atau if e > 0.0 else u + atau
+            L -= r
+        y = u + (y - u) * exp(-L / tau) if tau > 0.0 else u
+    return np.array(y0), np.array(ramp)
 
 
 def _segment_integrals(sig, y0, u, ramp, sign, tau, a):

@@ -165,8 +165,8 @@ class SimWorld(BulletSession):
     ``gui``; keyword-only: ``anchor_params`` (AnchorParams, None = robots
     without anchors), ``world_params`` (WorldParams), ``solver_iterations``,
     ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
-    puzzlebot_common.effects.ActuatorModel applied to every robot's commands,
-    None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
+    puzzlebot_common.effects.ActuatorModel applied to each robot's commands,
+    its ``robots:`` entries per robot name; None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
     ``mocap`` (MocapModel), ``anchor_rest`` (AnchorRestParams: when resting
     anchors are frozen to their robot; off with the GUI, which would not show them),
     ``tilted_solver_iterations`` (solver iterations while any robot is tilted by more
@@ -249,16 +249,18 @@ class SimWorld(BulletSession):
             self.robots[s.name] = self._spawn(s)
             self._cmd[s.name] = (0.0, 0.0)
             self._driven[s.name] = (0.0, 0.0)
-            self._plants[s.name] = self._make_plant()
+            self._plants[s.name] = self._make_plant(s.name)
         self.names = names
 
     # ----------------------------------------------------------------- setup
-    def _make_plant(self):
-        if self._actuator_model is None:
+    def _make_plant(self, name):
+        """The robot's actuator plant: its own model (``ActuatorModel.for_robot``), None if it has no effect."""
+        model = self._actuator_model.for_robot(name) if self._actuator_model is not None else None
+        if model is None or not model.effects:
             return None
         from puzzlebot_common.effects import ActuatorPlant
 
-        return ActuatorPlant(self._actuator_model)
+        return ActuatorPlant(model)
 
     def _set_group(self, body, link, group):
         pb.setCollisionFilterGroupMask(body, link, group, _MASKS[group], physicsClientId=self.client)

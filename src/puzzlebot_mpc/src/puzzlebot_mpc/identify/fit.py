@@ -63,7 +63,8 @@ class Spec:
 class Context:
     """What a robot's commands say about the sizes that matter (for scans and minimum sizes)."""
 
-    period: float      # s: median command period
+    period: float      # s: the command period (10th percentile of the intervals between commands: a CSV
+                       # without t_cmd shows only the changes of the command)
     v_typ: float       # m/s: median magnitude of the nonzero v commands
     w_typ: float       # rad/s: ... of w
     dv: float          # m/s: 90th percentile of the changes of v between commands
@@ -76,7 +77,9 @@ class Context:
             x = np.abs(x[x != 0])
             return float(np.percentile(x, q)) if x.size else 0.0
 
-        period = float(np.median(np.diff(r.cmd_t))) if r.cmd_t.size > 1 else 0.1
+        gaps = np.diff(r.cmd_t)
+        gaps = gaps[gaps > 0]
+        period = float(np.percentile(gaps, 10)) if gaps.size else 0.1
         return cls(period, typical(r.cmd_v, 50), typical(r.cmd_w, 50), typical(np.diff(r.cmd_v), 90),
                    typical(np.diff(r.cmd_w), 90), r.duration)
 
