@@ -99,9 +99,9 @@ def table(result):
             ("nominal unicycle", "%.2f" % (1e3 * rep["before"]["rmse_pos_m"]),
              "%.1f" % (1e3 * rep["before"]["rmse_yaw_rad"]))]
     for e in rep["effects"]:
-        when = e["params_when_added"]
-        first = next(iter(when.values()))
-        text = _params_text(first) if all(v == first for v in when.values()) or len(when) == 1 else "per robot"
+        when = list(e["params_when_added"].values())
+        median = {k: sorted(p[k] for p in when)[len(when) // 2] for k in when[0]}
+        text = _params_text(median) + (" median of the robots' fits" if len(when) > 1 else "")
         rows.append(("+ %s (%s)" % (e["name"], text), "%.2f" % (1e3 * e["after"]["rmse_pos_m"]),
                      "%.1f" % (1e3 * e["after"]["rmse_yaw_rad"])))
     b, a = rep["before"], rep["after"]
