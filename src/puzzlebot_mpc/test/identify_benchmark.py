@@ -6,7 +6,7 @@ that differ, mocap artefacts, CSV command timing), simulates 3 robots x 150 s
 of 100 Hz mocap (noise, dropped samples) with 10 Hz commands, writes the
 scenario's bag or CSV (--format: all as one), runs the command-line tool on it as a user
 would (``python -m puzzlebot_mpc.identify DATA --out --model-out --plot``,
-wall time measured, including start-up, reading, plotting and writing), and
+wall and CPU time measured, including start-up, reading, plotting and writing), and
 prints the recovery table: effects named, parameter errors, validation
 position RMSE against the true model's, residual verdict, runtime.
 
@@ -17,6 +17,7 @@ position RMSE against the true model's, residual verdict, runtime.
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -39,13 +40,15 @@ def run(name, sc, args, tmp):
     else:
         synth.write_csv(path, rec, command_times=sc.get("csv_times", False))
     out = path + ".json"
-    t0 = time.time()
+    t0, c0 = time.time(), resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run([sys.executable, "-m", "puzzlebot_mpc.identify", path, "--out", out,
                            "--model-out", path + ".yaml", "--plot", path + ".png", "--quiet"],
                           capture_output=True, text=True)
     wall = time.time() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
     if proc.returncode != 0:
-        return "| %s | tool failed: %s |" % (name, proc.stderr.strip()), False, wall
+        return "| %s | tool failed: %s |" % (name, proc.stderr.strip()), False, (wall, cpu)
     rep = json.load(open(out))
     model = ActuatorModel.load(path + ".yaml")
     truth = ActuatorModel()
@@ -71,11 +74,11 @@ def run(name, sc, args, tmp):
         e.split(" (")[0].split(" ")[0] + " " + e.split(" ")[1] + " (" + e.split(" (")[1] for e in errs))
     ratio = rep["after"]["rmse_pos_m"] / true.rmse_pos_m
     ok &= ratio <= scenarios.RMSE_FACTOR
-    row = "| %s | %s | %s | %.2f | %.2f | %.2f | %.2f | %s | %.1f |" % (
+    row = "| %s | %s | %s | %.2f | %.2f | %.2f | %.2f | %s | %.1f / %.1f |" % (
         name, " / ".join(sorted(found)), "; ".join(errs) or "-", 1e3 * rep["before"]["rmse_pos_m"],
         1e3 * rep["after"]["rmse_pos_m"], 1e3 * true.rmse_pos_m, ratio,
-        "white" if rep["residual"]["white"] else "structured", wall)
-    return row, ok, wall
+        "white" if rep["residual"]["white"] else "structured", wall, cpu)
+    return row, ok, (wall, cpu)
 
 
 def main(argv=None):
@@ -90,7 +93,7 @@ def main(argv=None):
     print("%d robots x %.0f s, 100 Hz mocap, %s, seed %d" % (args.robots, args.duration, args.format or "format of "
                                                              "each scenario", args.seed))
     print("| scenario | effects found | parameters (error) | pos RMSE nominal [mm] | identified [mm] | "
-          "true model [mm] | ratio | residual | wall time [s] |")
+          "true model [mm] | ratio | residual | wall / CPU time [s] |")
     print("|---|---|---|---|---|---|---|---|---|")
     walls, passed = [], 0
     with tempfile.TemporaryDirectory(prefix="identify_bench_") as tmp:
@@ -99,10 +102,12 @@ def main(argv=None):
             print(row + ("" if ok else " **FAIL**"), flush=True)
             walls.append(wall)
             passed += ok
-    walls.sort()
+    wall = sorted(w for w, _ in walls)
+    cpu = sorted(c for _, c in walls)
     print("\n%d of %d scenarios pass (names exact, parameters within %.0f %%, RMSE within %.1fx of the true model); "
-          "wall time median %.1f s, max %.1f s" % (passed, len(names), 100 * scenarios.PARAM_TOLERANCE,
-                                                   scenarios.RMSE_FACTOR, walls[len(walls) // 2], walls[-1]))
+          "wall time median %.1f s, max %.1f s; CPU time median %.1f s, max %.1f s; load average %.1f"
+          % (passed, len(names), 100 * scenarios.PARAM_TOLERANCE, scenarios.RMSE_FACTOR, wall[len(wall) // 2],
+             wall[-1], cpu[len(cpu) // 2], cpu[-1], os.getloadavg()[0]))
 
 
 if __name__ == "__main__":

@@ -163,8 +163,8 @@ def test_unknown_effect_is_reported_as_structured_residual(tmp_path):
 def test_time_dependence_and_saturation_are_named(tmp_path, effects, seed):
     """What the nominal model lacks is named in its residual notes (a drifting gain as time dependence);
     the identified model, which holds it, leaves neither. (The saturation test is weaker: an
-    acceleration limit of 0.25 m/s^2 in 2 x 45 s gave p = 0.33 (along) and 0.02 (yaw) for the nominal
-    model, not significant; it is identified all the same, scenario "accel_limit".)"""
+    acceleration limit of 0.25 m/s^2 in 2 x 45 s gives p = 0.23 (along) for the nominal model, not
+    significant, docs/model-identification.md; it is identified all the same, scenario "accel_limit".)"""
     rec = synth.lab_record(effects, n_robots=ROBOTS, duration=DURATION, seed=seed)
     path = str(tmp_path / "diag.bag")
     synth.write_bag(path, rec)

@@ -563,7 +563,7 @@ def eliminate(fits, names, params, cv, settings, say=lambda msg: None):
         for name in names[:-1]:     # the last one was just tested against the model without it
             rest = [n for n in names if n != name]
             start = [dict(p, **{k: NOMINAL[k] for k in EFFECTS[name]}) for p in params]
-            refit = [rf.fit(rest, q) for rf, q in zip(fits, start)]
+            refit = [rf.fit(rest, q, max_nfev=2 * settings.cv_nfev) for rf, q in zip(fits, start)]
             rest_cv = cross_validate(fits, rest, refit, settings)
             ok, reason = accepts(settings, fits, rest_cv.errors, cv.errors)
             if not ok:

@@ -38,6 +38,7 @@ COMMAND_LAG_STEP_S = 0.1   # s: spacing of the lagged-command regressors (the co
 WINDOW_SAMPLES = 11        # samples of the commands within a window (for their mean and change)
 FAMILIES = 3              # test families sharing residual_alpha: autocorrelation, mean, correlations
 TOP_CORRELATIONS = 5       # strongest correlations listed in the report
+SATURATION_LEAD_S = 0.3    # s: command changes this long before a window still act on it (a ramp in progress)
 
 
 @dataclass
@@ -99,6 +100,17 @@ def regressors(r, w, settings):
         v, om = engine.command_at(r, w.ts - k * COMMAND_LAG_STEP_S)
         out["v_cmd(ts-%.1fs)" % (k * COMMAND_LAG_STEP_S)] = v
         out["w_cmd(ts-%.1fs)" % (k * COMMAND_LAG_STEP_S)] = om
+    # the command changes acting on the window (from SATURATION_LEAD_S before it): their sum and the sum of
+    # their signed squares (a saturation grows with the square of a change, a timing error linearly)
+    for attr, label in (("cmd_v", "v_cmd"), ("cmd_w", "w_cmd")):
+        d = np.diff(getattr(r, attr))
+        t = r.cmd_t[1:]
+        lin = np.concatenate([[0.0], np.cumsum(d)])
+        sq = np.concatenate([[0.0], np.cumsum(d * np.abs(d))])
+        a = np.searchsorted(t, w.ts - SATURATION_LEAD_S, side="right")
+        b = np.searchsorted(t, w.te, side="right")
+        out["%s changes near window" % label] = lin[b] - lin[a]
+        out["%s changes^2 near window" % label] = sq[b] - sq[a]
     # the measured motion, the heading in the world, time
     dur = w.te - w.ts
     out["measured speed"] = ((w.p_end - w.p_start) * np.exp(-1j * w.yaw_start)).real / dur
@@ -303,18 +315,20 @@ def _partial_t(y, x, control):
 
 
 def saturation(analysis):
-    """Does the residual grow faster than linearly with the commanded acceleration (the command change
-    in the window)? The along-track (yaw) residual against the signed square of the v (w) command
-    change, with the linear part removed (a timing error is linear in it), robust t, two-sided,
-    Bonferroni over v and w."""
+    """Does the residual grow faster than linearly with the commanded acceleration? The along-track (yaw)
+    residual against the sum of the signed squares of the v (w) command changes acting on the window,
+    with their linear sum removed (a timing error is linear in it), robust t, two-sided, Bonferroni
+    over v and w."""
     out = {}
     if not analysis.robots:
         return out
-    for comp, reg in (("along", "v_cmd change in window"), ("yaw", "w_cmd change in window")):
+    for comp, cmd in (("along", "v_cmd"), ("yaw", "w_cmd")):
         y = analysis.pooled(comp)
-        x = np.concatenate([rr.reg[reg] for rr in analysis.robots])
-        r, t = _partial_t(y, x * np.abs(x), x)
-        out[comp] = {"regressor": reg, "r": r, "p": float(min(1.0, 2 * 2 * stats.norm.sf(abs(t))))}
+        lin = np.concatenate([rr.reg["%s changes near window" % cmd] for rr in analysis.robots])
+        sq = np.concatenate([rr.reg["%s changes^2 near window" % cmd] for rr in analysis.robots])
+        r, t = _partial_t(y, sq, lin)
+        out[comp] = {"regressor": "%s changes^2 near window" % cmd, "r": r,
+                     "p": float(min(1.0, 2 * 2 * stats.norm.sf(abs(t))))}
     return out
 
 
@@ -335,7 +349,7 @@ def diagnose(analysis, fits, params, settings):
     else:
         parts.append("time dependence: not tested (too few parts with motion)")
     if sat:
-        text = ", ".join("%s residual vs the signed square of the %s r = %+.2f (p = %.2g)"
+        text = ", ".join("%s residual vs %s (signed) r = %+.2f (p = %.2g)"
                          % (c, d["regressor"], d["r"], d["p"]) for c, d in sat.items())
         bad = [c for c, d in sat.items() if d["p"] < alpha]
         parts.append("saturation: %s; %s" % (
