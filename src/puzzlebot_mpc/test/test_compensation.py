@@ -244,11 +244,11 @@ def test_each_robot_is_planned_with_its_own_model():
 
 
 def test_acceleration_limited_inverse_reaches_the_plan_or_ramps():
-    from puzzlebot_common.effects import _response
+    from puzzlebot_common.effects import lag_response
     from puzzlebot_mpc.compensation import lag_inverse
 
     for y0, target, tau, a in ((0.0, 0.03, 0.1, 0.4), (0.05, 0.02, 0.1, 0.4), (0.0, 0.03, 0.0, 0.4)):
         u = lag_inverse(target, y0, tau, a, 0.1)
-        assert _response(y0, u, tau, a, 0.1)[2] == pytest.approx(target, abs=1e-9)
+        assert lag_response(y0, u, tau, a, 0.1)[2] == pytest.approx(target, abs=1e-9)
     u = lag_inverse(0.1, 0.0, 0.1, 0.4, 0.1)          # 0.1 m/s in 0.1 s needs 1 m/s^2: ramp all the way
-    assert _response(0.0, u, 0.1, 0.4, 0.1)[2] == pytest.approx(0.04)
+    assert lag_response(0.0, u, 0.1, 0.4, 0.1)[2] == pytest.approx(0.04)

@@ -11,7 +11,6 @@ nothing on clean data. Records are shorter than lab runs (2 robots x 45 s,
 """
 
 import json
-import math
 import os
 import subprocess
 import sys
@@ -20,7 +19,7 @@ import numpy as np
 import pytest
 
 import identify_synth as synth
-from puzzlebot_common.effects import EFFECTS, ActuatorModel
+from puzzlebot_common.effects import ActuatorModel
 from puzzlebot_mpc.identify import core, data
 
 ROBOTS = 2

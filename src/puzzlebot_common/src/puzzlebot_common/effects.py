@@ -274,7 +274,7 @@ def _ramp_time(e, tau, a):
     return max(0.0, (abs(e) - a * tau) / a)
 
 
-def _response(y0, u, tau, a, h):
+def lag_response(y0, u, tau, a, h):
     """y' = clip((u - y) / tau, -a, a) from y0 over h seconds with a constant target u (tau = 0: y
     jumps to u, or ramps to it at the rate a): returns (integral of y, integral of s y with s from
     the start, y at the end); exact."""
@@ -405,8 +405,8 @@ class ActuatorPlant:
                 nxt = min(t_end, max(s, self._queue[0][0] + self.delay))
             h = nxt - s
             if h > self.TIME_EPS:
-                iv0, iv1, self.v = _response(self.v, v_t, self.tau_v, self.a_v, h)
-                iw0, iw1, self.w = _response(self.w, w_t, self.tau_w, self.a_w, h)
+                iv0, iv1, self.v = lag_response(self.v, v_t, self.tau_v, self.a_v, h)
+                iw0, iw1, self.w = lag_response(self.w, w_t, self.tau_w, self.a_w, h)
                 g = self.gain(s)
                 sum_v += g * iv0 + self.rate * iv1
                 sum_w += g * iw0 + self.rate * iw1
@@ -576,7 +576,7 @@ def _limited_integrals(u, tau, a, p, t0, dt, n, x0):
 def _segment_starts(us, lengths, y, tau, a):
     """The lagged velocity at the start of each segment (constant target us[i] for lengths[i] s) and
     how long it stays saturated there: the sequential part of _limited_integrals (a tight loop; the
-    same arithmetic as _response)."""
+    same arithmetic as lag_response)."""
     n = len(us)
     y0, ramp = [0.0] * n, [0.0] * n
     atau = a * tau
@@ -600,7 +600,7 @@ def _segment_starts(us, lengths, y, tau, a):
 
 def _segment_integrals(sig, y0, u, ramp, sign, tau, a):
     """Integrals of y and of s y over [0, sig] of a segment starting at y0 with target u (vectorised
-    _response)."""
+    lag_response)."""
     T = np.minimum(sig, ramp)
     sa = sign * a
     f0 = y0 * T + sa * T * T / 2.0

@@ -60,7 +60,7 @@ import numpy as np
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import wrap_angle
-from puzzlebot_common.effects import (ActuatorModel, _response, actual_velocity, actuator_state, predict)
+from puzzlebot_common.effects import (ActuatorModel, lag_response, actual_velocity, actuator_state, predict)
 
 #: Shortest command history fed to the actuator model [s] (the identification tool's).
 MIN_HISTORY_S = 2.0
@@ -89,7 +89,7 @@ def lag_inverse(target, y0, tau, a, dt):
     lo, hi = y0, y0 + math.copysign(a * (dt + tau) + abs(target - y0), target - y0)
     for _ in range(INVERSE_STEPS):
         mid = 0.5 * (lo + hi)
-        if (_response(y0, mid, tau, a, dt)[2] - target) * (hi - lo) < 0:
+        if (lag_response(y0, mid, tau, a, dt)[2] - target) * (hi - lo) < 0:
             lo = mid
         else:
             hi = mid

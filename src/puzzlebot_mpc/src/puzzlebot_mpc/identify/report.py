@@ -66,6 +66,7 @@ def report_dict(result):
         "acceptance": margin_text(s),
         "sharing": sharing,
         "pruned": sel.pruned,
+        "removed": sel.removed,
         "model": result.model.to_dict()["model"],
         "windows": {"total": sum(len(rf.windows) for rf in result.problem.fits), "stride_s": s.window_stride_s},
         "trace": trace,
@@ -128,6 +129,8 @@ def table(result):
                                                            for c in rnd["candidates"])))
         for t in rnd["tried"]:
             lines.append("     -> %s %s (%s)" % (t["name"], "added" if t["accepted"] else "rejected", t["reason"]))
+    for d in rep["removed"]:
+        lines.append("removed by the backward check: %s (%s)" % (d["name"], d["reason"]))
     for d in rep["sharing"]:
         lines.append("sharing %s: %s (%s)" % (d["name"], "shared" if d["shared"] else "per robot", d["reason"]))
     if len(rep["robots"]) > 1:
