@@ -565,11 +565,18 @@ def _limited_integrals(u, tau, a, p, t0, dt, n, x0):
     seg_u = u[first]
     y0, ramp = _segment_starts(seg_u.tolist(), seg_len.tolist(), float(x0), tau, a)
     sign = np.sign(seg_u - y0)
-    sa = start_t - seg_t0[seg]
-    f0a, f1a = _segment_integrals(sa, y0[seg], seg_u[seg], ramp[seg], sign[seg], tau, a)
-    f0b, f1b = _segment_integrals(sa + length, y0[seg], seg_u[seg], ramp[seg], sign[seg], tau, a)
-    d0 = f0b - f0a
-    d1 = f1b - f1a + (seg_t0[seg] - (t0 + dt * k)) * d0      # moment about the interval's start
+    # the integrals from each segment's start to every piece start and to the segment's end, in one go
+    sig = np.concatenate([start_t - seg_t0[seg], seg_len])
+    idx = np.concatenate([seg, np.arange(first.size)])
+    f0, f1 = _segment_integrals(sig, y0[idx], seg_u[idx], ramp[idx], sign[idx], tau, a)
+    n_p = k.size
+    last = np.ones(n_p, bool)
+    last[:-1] = seg[1:] != seg[:-1]                            # the last piece of its segment
+    nxt = np.minimum(np.arange(1, n_p + 1), n_p - 1)
+    f0b = np.where(last, f0[n_p + seg], f0[nxt])
+    f1b = np.where(last, f1[n_p + seg], f1[nxt])
+    d0 = f0b - f0[:n_p]
+    d1 = f1b - f1[:n_p] + (seg_t0[seg] - (t0 + dt * k)) * d0      # moment about the interval's start
     return np.bincount(k, d0, minlength=n)[:n], np.bincount(k, d1, minlength=n)[:n]
 
 
@@ -604,7 +611,7 @@ def _segment_integrals(sig, y0, u, ramp, sign, tau, a):
     T = np.minimum(sig, ramp)
     sa = sign * a
     f0 = y0 * T + sa * T * T / 2.0
-    f1 = y0 * T * T / 2.0 + sa * T ** 3 / 3.0
+    f1 = T * T * (y0 / 2.0 + sa * T / 3.0)
     yT = y0 + sa * T
     q = sig - T
     f0 = f0 + u * q
@@ -617,7 +624,15 @@ def _segment_integrals(sig, y0, u, ramp, sign, tau, a):
     return f0, f1
 
 
-def actuator_velocities(params, cmd_t, cmd_v, cmd_w, t0, dt, n, initial=None, pieces=None, t_start=0.0):
+#: Parameters each velocity component depends on (before the bias); a memo keyed by them lets a
+#: caller that varies one component's parameters (finite differences) reuse the other.
+COMPONENT_KEYS = (("delay_s", "v_min", "v_c", "k_v", "tau_v_s", "a_v", "rate_per_s"),
+                  ("delay_s", "w_min", "w_c", "k_w", "tau_w_s", "a_w", "rate_per_s"))
+MEMO_SIZE = 4   # entries kept per component
+
+
+def actuator_velocities(params, cmd_t, cmd_v, cmd_w, t0, dt, n, initial=None, pieces=None, t_start=0.0,
+                        memo=None):
     """The plant vectorised on the grid t0 + k dt, k = 0..n: mean body velocity
     (v, w) over each interval, as two arrays of length n.
 
@@ -633,21 +648,31 @@ def actuator_velocities(params, cmd_t, cmd_v, cmd_w, t0, dt, n, initial=None, pi
     """
     p = pieces if pieces is not None else command_pieces(cmd_t, params["delay_s"], t0, dt, n)
     rate = params["rate_per_s"]
-    targets = (_targets(cmd_v, params["v_min"], params["v_c"], params["k_v"], p),
-               _targets(cmd_w, params["w_min"], params["w_c"], params["k_w"], p))
-    out = []
-    for j, (u, tau, a) in enumerate(((targets[0], params["tau_v_s"], params["a_v"]),
-                                     (targets[1], params["tau_w_s"], params["a_w"]))):
-        x0 = (u[0] if u.size else 0.0) if initial is None else initial[j]
-        if math.isinf(a) or n == 0:
-            i0, i1 = _lag_integrals(u, tau, p, dt, n, x0, rate != 0.0)
+    specs = ((cmd_v, params["v_min"], params["v_c"], params["k_v"], params["tau_v_s"], params["a_v"]),
+             (cmd_w, params["w_min"], params["w_c"], params["k_w"], params["tau_w_s"], params["a_w"]))
+    out, targets = [], []
+    for j, (values, u_min, c, gain, tau, a) in enumerate(specs):
+        key = (j, tuple(params[k] for k in COMPONENT_KEYS[j]), initial)
+        if memo is not None and key in memo:
+            mean, u = memo[key]
         else:
-            i0, i1 = _limited_integrals(u, tau, a, p, t0, dt, n, x0)
-        if rate != 0.0:
-            gain = 1.0 + rate * (t0 + dt * np.arange(n) - t_start)
-            out.append((gain * i0 + rate * i1) / dt)
-        else:
-            out.append(i0 / dt)
+            u = _targets(values, u_min, c, gain, p)
+            x0 = (u[0] if u.size else 0.0) if initial is None else initial[j]
+            if math.isinf(a) or n == 0:
+                i0, i1 = _lag_integrals(u, tau, p, dt, n, x0, rate != 0.0)
+            else:
+                i0, i1 = _limited_integrals(u, tau, a, p, t0, dt, n, x0)
+            if rate != 0.0:
+                g = 1.0 + rate * (t0 + dt * np.arange(n) - t_start)
+                mean = (g * i0 + rate * i1) / dt
+            else:
+                mean = i0 / dt
+            if memo is not None:
+                if len(memo) >= 2 * MEMO_SIZE:
+                    memo.pop(next(iter(memo)))
+                memo[key] = (mean, u)
+        out.append(mean)
+        targets.append(u)
     v, w = out
     w = w + params["w_per_v"] * v
     if params["w0"] != 0.0:

@@ -47,7 +47,8 @@ class Windows:
     fs: np.ndarray
     ke: np.ndarray
     fe: np.ndarray
-    cache: dict = field(default_factory=dict, repr=False)   # delay -> command pieces of the grid
+    cache: dict = field(default_factory=dict, repr=False)   # delay -> command pieces of the grid, and
+                                                             # ("memo", delay) -> their component memo
     part: np.ndarray = None   # cross-validation part (fold) of each window
     edges: np.ndarray = None  # time edges [s] of the parts (len = parts + 1)
 
@@ -130,16 +131,20 @@ def _pieces(r, w, delay):
     parameters far more often than the delay)."""
     cache = w.cache
     if delay not in cache:
-        if len(cache) >= PIECES_CACHE:
-            cache.pop(next(iter(cache)))
+        if len(cache) >= 2 * PIECES_CACHE:       # pieces and their component memos
+            old = next(k for k in cache if not isinstance(k, tuple))
+            cache.pop(old)
+            cache.pop(("memo", old), None)
         cache[delay] = command_pieces(r.cmd_t, delay, w.g0, w.dt, w.n)
     return cache[delay]
 
 
 def predict(params, r, w):
     """Predicted measured pose at each window's end: (complex position, yaw)."""
-    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n,
-                                pieces=_pieces(r, w, params["delay_s"]), t_start=r.t_start)
+    pieces = _pieces(r, w, params["delay_s"])
+    memo = w.cache.setdefault(("memo", params["delay_s"]), {})
+    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n, pieces=pieces,
+                                t_start=r.t_start, memo=memo)
     dth = om * w.dt
     theta = np.concatenate([[0.0], np.cumsum(dth)])
     half = 0.5 * dth

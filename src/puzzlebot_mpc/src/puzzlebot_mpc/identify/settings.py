@@ -42,7 +42,7 @@ class IdentifySettings:
     residual_alpha: float = 0.01     # significance level of the whiteness and correlation tests
     max_command_lag_s: float = 0.5   # s: regressors include the commands up to this far back
     max_nfev: int = 20               # least-squares function evaluations per fit
-    cv_nfev: int = 8                 # ... per cross-validation refit (started from the fit on all data)
+    cv_nfev: int = 5                 # ... per cross-validation refit (started from the fit on all data)
     glitch_speed: float = 1.0        # m/s: a pose farther from its neighbours' median than this speed
     glitch_margin_m: float = 0.01    # m    allows (plus this margin) is a mocap glitch and dropped
     glitch_turn_rate: float = 20.0   # rad/s: the same for the yaw ...
