@@ -1,16 +1,16 @@
 """The loop closed, end to end in the Bullet simulation (no roscore).
 
 1. **Inject** actuator and measurement effects into the simulation, unknown
-   to the controller (``config/loop_demo.yaml``: an input delay and a motor
-   lag through an ``ActuatorPlant``, a wheel imbalance, a mocap heading
-   offset, mocap noise and dropped samples).
+   to the controller (``config/loop_demo.yaml``: input delays that differ
+   between the robots and a motor lag through each robot's ``ActuatorPlant``,
+   a wheel imbalance, a mocap heading offset, mocap noise and dropped samples).
 2. **Record** a run of the plain-unicycle MPC on a tracking task (robots
    visiting random goals) as a ROS bag, as ``record.launch`` would:
    ``/vicon/<r>/<r>`` (the mocap measurements, 100 Hz) and ``/<r>/cmd_vel``
    (the commands, 10 Hz).
 3. **Identify** the effects in the bag with ``identify_model``'s core (it is
    told nothing about the injected effects) and write ``model.yaml``.
-4. **Rerun** the same seeds with the MPC planning with the identified model,
+4. **Rerun** the same seeds with the MPC planning with the identified model (each robot its own),
    with the plain unicycle, and with the injected effects as the reference
    ("true model"); report tracking errors measured on the simulated bodies
    (not the mocap), and coupling success of two robots with their anchors.
@@ -155,7 +155,7 @@ def make_world(demo, injected, starts, seed, anchors):
     mocap = MocapModel(demo.mocap_position_std, demo.mocap_yaw_std, demo.mocap_dropout, demo.mocap_heading_offset)
     return SimWorld(RobotParams(), starts, physics_rate=demo.physics_rate,
                     anchor_params=AnchorParams() if anchors else None, seed=seed,
-                    actuator_model=injected if injected.effects else None,
+                    actuator_model=injected if injected.has_effects() else None,
                     wheel_imbalance=demo.wheel_imbalance, mocap=mocap)
 
 

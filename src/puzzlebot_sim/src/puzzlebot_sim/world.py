@@ -166,7 +166,8 @@ class SimWorld(BulletSession):
     without anchors), ``world_params`` (WorldParams), ``solver_iterations``,
     ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
     puzzlebot_common.effects.ActuatorModel applied to each robot's commands,
-    its ``robots:`` entries per robot name; None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
+    its ``robots:`` entries by robot name; None = ideal), ``wheel_imbalance``
+    (right wheel x (1 + k), left x (1 - k)),
     ``mocap`` (MocapModel), ``anchor_rest`` (AnchorRestParams: when resting
     anchors are frozen to their robot; off with the GUI, which would not show them),
     ``tilted_solver_iterations`` (solver iterations while any robot is tilted by more
