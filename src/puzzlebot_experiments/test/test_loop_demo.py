@@ -17,10 +17,15 @@ def test_reduced_demo_identified_model_tracks_better_on_the_same_seed(tmp_path):
     # controller on seed 1 and one coupling trial each.
     cfg = ld.load_config(overrides={"legs": 2, "couple_trials": 1, "couple_timeout": 20.0})
     out = ld.run(cfg, [1], 0, str(tmp_path), say=lambda msg: None)
-    ident = out["identified_model"]["model"]["effects"]
-    found = {e["name"]: e["params"] for e in ident}
-    assert "input_delay" in found and found["input_delay"]["delay_s"] == pytest.approx(0.15, rel=0.2), found
-    assert "heading_offset" in found and found["heading_offset"]["offset_rad"] == pytest.approx(0.05, rel=0.2)
+    from puzzlebot_common.effects import ActuatorModel
+
+    ident = ActuatorModel.from_dict(out["identified_model"])
+    for robot in ("pz1", "pz2", "pz3"):     # the robots differ: each its own delay (0.075, 0.15, 0.3 s)
+        mine = ident.for_robot(robot)
+        assert mine.param("delay_s") == pytest.approx(cfg.true_model.for_robot(robot).param("delay_s"), rel=0.2), \
+            (robot, out["identified_model"])
+        assert mine.param("offset_rad") == pytest.approx(0.05, rel=0.2), (robot, out["identified_model"])
+    assert set(out["per_robot"]["identified"]) == {"pz1", "pz2", "pz3"}
     plain, after = out["summary"]["plain"], out["summary"]["identified"]
     assert after["steady_mean_mm"] < 0.6 * plain["steady_mean_mm"], (plain, after)
     assert after["steady_max_mm"] <= 1e3 * cfg.demo.reach_tolerance < plain["steady_max_mm"], (plain, after)

@@ -37,8 +37,9 @@ def model_of(effects):
     return m
 
 
-def make_commands(rng, duration):
-    """Commands (t_issue, v, w) at CMD_RATE with a few ms of jitter."""
+def make_commands(rng, duration, on_rows=None):
+    """Commands (t_issue, v, w) at CMD_RATE with a few ms of jitter; ``on_rows`` = (phase, period):
+    each command issued at a pose sample time instead (a controller that answers each pose)."""
     period = 1.0 / CMD_RATE
     n = int(duration * CMD_RATE)
     v = np.zeros(n)
@@ -75,12 +76,15 @@ def make_commands(rng, duration):
     # through the mocap frames, as in the lab) and each command has a few ms of jitter.
     drift = rng.choice([-1, 1]) * rng.uniform(*CLOCK_DRIFT)
     t = period * (1.0 + drift) * np.arange(n) + rng.uniform(0.0, CMD_JITTER, n)
+    if on_rows is not None:
+        phase, pose_period = on_rows
+        t = phase + pose_period * np.ceil((t - phase) / pose_period - 1e-9)
     return list(zip(t, v, w))
 
 
-def simulate(model, commands, duration, dt=0.002, pose0=(0.0, 0.0, 0.0)):
+def simulate(model, commands, duration, dt=0.002, pose0=(0.0, 0.0, 0.0), t_start=0.0):
     """True body poses at t = k dt: ActuatorPlant + exact unicycle arcs."""
-    plant = ActuatorPlant(model)
+    plant = ActuatorPlant(model, t_start)
     n = int(round(duration / dt))
     poses = np.empty((n + 1, 3))
     pose = np.array(pose0, dtype=float)
@@ -98,22 +102,27 @@ def simulate(model, commands, duration, dt=0.002, pose0=(0.0, 0.0, 0.0)):
 
 
 def lab_record(effects, n_robots=3, duration=150.0, seed=0, pos_noise=POS_NOISE, yaw_noise=YAW_NOISE,
-               drop=DROP_FRACTION, dt=0.002, mutate=None):
-    """Synthetic record: {robot: dict(t, x, y, yaw, cmd)} with the true ``effects`` ({name: params}).
+               drop=DROP_FRACTION, dt=0.002, mutate=None, robot_effects=None, commands_on_rows=False,
+               latency=0.0, outliers=0, bursts_per_min=DROP_BURSTS_PER_MIN):
+    """Synthetic record: {robot: dict(t, x, y, yaw, cmd)} with the true ``effects`` ({name: params})
+    on every robot, or ``robot_effects`` ({robot: {name: params}}) replacing them for some.
 
     ``mutate(t, x, y, yaw, v_body, w_body)`` may alter the measured poses to inject an effect
-    outside the candidate set (for the "unknown effect left" test).
+    outside the candidate set (for the "unknown effect left" test); ``commands_on_rows``: commands
+    issued at pose sample times; ``latency`` [s]: the mocap stamps each pose this late; ``outliers``:
+    this many marker swaps (a pose 5 cm off) per robot. The first pose sample is never dropped (the
+    plant's drifting gain starts there, as the tool assumes).
     """
     rng = np.random.default_rng(seed)
-    model = model_of(effects)
     robots = {}
     for j in range(n_robots):
         name = "pz%d" % (j + 1)
-        cmds = make_commands(rng, duration)
-        pose0 = (rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-math.pi, math.pi))
-        poses, plant = simulate(model, cmds, duration, dt, pose0)
+        model = model_of((robot_effects or {}).get(name, effects))
         step = int(round(1.0 / (MOCAP_RATE * dt)))
         phase = int(rng.integers(0, step))
+        cmds = make_commands(rng, duration, (phase * dt, step * dt) if commands_on_rows else None)
+        pose0 = (rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-math.pi, math.pi))
+        poses, plant = simulate(model, cmds, duration, dt, pose0, t_start=phase * dt + latency)
         idx = np.arange(phase, poses.shape[0], step)
         t = idx * dt
         x, y, th = poses[idx, 0], poses[idx, 1], poses[idx, 2]
@@ -122,30 +131,35 @@ def lab_record(effects, n_robots=3, duration=150.0, seed=0, pos_noise=POS_NOISE,
         yaw = wrap_angle(th + model.param("offset_rad") + rng.normal(0, yaw_noise, t.size))
         x = x + rng.normal(0, pos_noise, t.size)
         y = y + rng.normal(0, pos_noise, t.size)
+        for k in rng.choice(np.arange(10, t.size - 10), outliers, replace=False) if outliers else []:
+            x[k] += 0.05
         keep = rng.random(t.size) >= drop
-        for _ in range(int(DROP_BURSTS_PER_MIN * duration / 60.0)):
+        for _ in range(int(bursts_per_min * duration / 60.0)):
             s = int(rng.integers(0, t.size))
             keep[s:s + int(rng.integers(5, 30))] = False
-        robots[name] = dict(t=t[keep], x=x[keep], y=y[keep], yaw=yaw[keep], cmd=cmds)
+        keep[0] = True
+        robots[name] = dict(t=t[keep] + latency, x=x[keep], y=y[keep], yaw=yaw[keep], cmd=cmds)
     return robots
 
 
-def write_csv(path, robots, t0=0.0):
-    """CSV in the tool's format: one row per pose sample, with the command in force then."""
+def write_csv(path, robots, t0=0.0, command_times=False):
+    """CSV in the tool's format: one row per pose sample, with the command in force then (and, with
+    ``command_times``, the t_cmd column: when that command was issued)."""
     rows = []
     for name, r in robots.items():
         ct = np.array([c[0] for c in r["cmd"]])
         for k in range(r["t"].size):
-            i = np.searchsorted(ct, r["t"][k], side="right") - 1
-            v, w = (r["cmd"][i][1], r["cmd"][i][2]) if i >= 0 else ("", "")
-            rows.append((r["t"][k] + t0, name, r["x"][k], r["y"][k], r["yaw"][k], v, w))
+            i = np.searchsorted(ct, r["t"][k] + 1e-9, side="right") - 1
+            v, w, tc = (r["cmd"][i][1], r["cmd"][i][2], ct[i] + t0) if i >= 0 else ("", "", "")
+            rows.append((r["t"][k] + t0, name, r["x"][k], r["y"][k], r["yaw"][k], v, w, tc))
     rows.sort(key=lambda row: row[0])
     with open(path, "w", newline="") as f:
         wr = csv.writer(f)
-        wr.writerow(["t", "robot", "x", "y", "yaw", "v_cmd", "w_cmd"])
+        wr.writerow(["t", "robot", "x", "y", "yaw", "v_cmd", "w_cmd"] + (["t_cmd"] if command_times else []))
         for row in rows:
             wr.writerow([repr(float(row[0]))] + [row[1]] + ["%.7f" % row[2], "%.7f" % row[3], "%.7f" % row[4]]
-                        + [("%.6f" % c) if c != "" else "" for c in row[5:]])
+                        + [("%.6f" % c) if c != "" else "" for c in row[5:7]]
+                        + ([repr(float(row[7])) if row[7] != "" else ""] if command_times else []))
 
 
 def write_bag(path, robots, t0=1.7e9, cmd_robots=None, pose_robots=None):

@@ -7,7 +7,7 @@ import pytest
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_mpc.behaviors import BehaviorRequest
-from puzzlebot_mpc.compensation import Compensation, load_model
+from puzzlebot_mpc.compensation import Compensation, NullCompensation, load_model
 from puzzlebot_mpc.control_loop import ControlLoop
 from puzzlebot_mpc.controller import MPCResult
 from puzzlebot_common.effects import ActuatorModel, ActuatorPlant
@@ -61,9 +61,9 @@ def drive_randomly(robot, comp, seconds, rng, name="r"):
 
 
 def test_empty_or_absent_model_is_the_plain_controller():
-    assert Compensation.create(None, ["r"], SETTINGS) is None
-    assert Compensation.create(ActuatorModel(), ["r"], SETTINGS) is None
-    assert ControlLoop(["r"], SETTINGS, actuator_model=ActuatorModel()).compensation is None
+    assert isinstance(Compensation.create(None, ["r"], SETTINGS), NullCompensation)
+    assert isinstance(Compensation.create(ActuatorModel(), ["r"], SETTINGS), NullCompensation)
+    assert not ControlLoop(["r"], SETTINGS, actuator_model=ActuatorModel()).compensation.active
 
     def run(**kw):
         loop = ControlLoop(["a", "b"], SETTINGS, **kw)
@@ -105,7 +105,7 @@ def test_predicted_initial_state_is_the_plant_state_when_the_new_command_acts(st
     mx, my, myaw = robot.measured()
     now = stamp + stamp_lag
     x0 = np.zeros((1, 5))
-    x0[0, :3] = mx, my, comp.body_yaw(myaw)
+    x0[0, :3] = mx, my, comp.body_yaw("r", stamp, myaw)
     comp.initial_states(x0, now, {"r": stamp})
     robot.run(now + 0.15 - robot.t)         # nothing sent at now acts before now + delay
     state = robot.plant.state(robot.t)
@@ -115,11 +115,16 @@ def test_predicted_initial_state_is_the_plant_state_when_the_new_command_acts(st
     assert x0[0, 4] == pytest.approx(state.w + 1.5 * state.v + 0.04, abs=1e-9)
 
 
-@pytest.mark.parametrize("lag", [True, False])
-def test_inverse_chain_gives_the_planned_velocity(lag):
+NEW_EFFECTS = {"friction_offset": {"v_c": 0.005, "w_c": 0.1}, "gain_drift": {"rate_per_s": -0.002},
+               "accel_limit": {"a_v": 0.4, "a_w": 6.0}}
+
+
+@pytest.mark.parametrize("lag, extra", [(True, {}), (False, {}), (True, NEW_EFFECTS)],
+                         ids=["lag", "no lag", "lag, friction, drift, limit"])
+def test_inverse_chain_gives_the_planned_velocity(lag, extra):
     """The command for a planned (v, w), sent now, makes the plant's body velocity equal to the plan:
     at the end of its control period with a lag (deadbeat), over the whole period without one."""
-    model = lab_model() if lag else lab_model(velocity_lag={"tau_v_s": 0.0, "tau_w_s": 0.0})
+    model = lab_model(**extra) if lag else lab_model(velocity_lag={"tau_v_s": 0.0, "tau_w_s": 0.0})
     rng = np.random.default_rng(7)
     for trial in range(5):
         robot = Robot(model)
@@ -127,18 +132,20 @@ def test_inverse_chain_gives_the_planned_velocity(lag):
         drive_randomly(robot, comp, 2.0, rng)
         x0 = np.zeros((1, 5))
         x0[0, :3] = robot.pose[0], robot.pose[1], robot.pose[2]
+        comp.robot("r").t_start = 0.0                 # the plant's drifting gain starts at 0
         comp.initial_states(x0, robot.t, {"r": robot.t})
         plan = (x0[0, 3] + rng.uniform(-0.008, 0.008), x0[0, 4] + rng.uniform(-0.1, 0.1))
-        v_cmd, w_cmd = comp.invert("r", *plan)
+        v_cmd, w_cmd = comp.invert("r", *plan, now=robot.t)
         assert abs(v_cmd) < SETTINGS.v_max and abs(w_cmd) < SETTINGS.w_max      # not clipped
         robot.command(v_cmd, w_cmd)
         robot.run(0.15)                               # the delay: the new command starts to act now
         t0 = robot.t
         mean_v, mean_w = robot.plant.advance(t0, SETTINGS.dt)
         if lag:
-            s = robot.plant.state(t0 + SETTINGS.dt)
-            assert s.v == pytest.approx(plan[0], abs=1e-9)
-            assert s.w + 1.5 * s.v + 0.04 == pytest.approx(plan[1], abs=1e-9)
+            end = robot.plant.velocity(t0 + SETTINGS.dt)
+            g_mid = robot.plant.gain(t0 + 0.5 * SETTINGS.dt) / robot.plant.gain(t0 + SETTINGS.dt)
+            assert end[0] * g_mid == pytest.approx(plan[0], abs=1e-9)
+            assert end[1] - (end[0] - end[0] * g_mid) * 1.5 == pytest.approx(plan[1], abs=2e-4)
         else:
             assert (mean_v, mean_w) == pytest.approx(plan, abs=1e-9)
 
@@ -149,10 +156,10 @@ def test_commands_respect_limits_deadband_and_zero_plans():
     assert comp.invert("r", 0.0, 0.0) == (0.0, 0.0)                   # at rest: exactly zero, no bias fix
     v, w = comp.invert("r", 0.05, 1.5)                                  # from rest: needs more than the limits
     assert (v, w) == (SETTINGS.v_max, SETTINGS.w_max)
-    comp._lagged["r"] = (0.002, 0.0)
+    comp.robot("r").lagged = (0.002, 0.0)
     v, _ = comp.invert("r", 0.002, 0.0)                                 # 0.002 / 0.9 < v_min / 2: nothing
     assert v == 0.0
-    comp._lagged["r"] = (0.006, 0.0)
+    comp.robot("r").lagged = (0.006, 0.0)
     v, _ = comp.invert("r", 0.006, 0.0)                                 # 0.0067 >= v_min / 2: the band's edge
     assert v == pytest.approx(0.01)
     result = MPCResult(np.array([[0.03, 0.2]]), np.zeros((1, 11, 5)), False, "failed", 0.0, 0, float("nan"),
@@ -169,7 +176,8 @@ def test_history_keeps_the_command_in_force():
     for k in range(1, 100):
         comp.record("r", 10.0 + 0.1 * k, 0.04, 0.0)
     sent = comp.sent("r")
-    assert len(sent) < 40 and sent[0][0] <= 19.9 - comp.history_s - comp.delay
+    part = comp.robot("r")
+    assert len(sent) < 40 and sent[0][0] <= 19.9 - part.history_s - part.delay
 
 
 def test_compensated_mpc_tracks_better_on_a_plant_with_effects():
@@ -217,3 +225,30 @@ def test_load_model(tmp_path):
     assert "\n" not in str(e.value)
     with pytest.raises(ConfigError, match="expected the path"):
         load_model(3)
+
+
+def test_each_robot_is_planned_with_its_own_model():
+    """model.yaml robots: entries: pz2's own delay replaces the shared one, pz3 (own model empty) is
+    the plain unicycle, unknown robots get the shared effects."""
+    model = ActuatorModel().add("input_delay", {"delay_s": 0.15})
+    model.add_for_robot("pz2", "input_delay", {"delay_s": 0.3})
+    model.add_for_robot("pz3", "input_delay", {"delay_s": 0.0})
+    comp = Compensation.create(model, ["pz1", "pz2", "pz3"], SETTINGS)
+    assert comp.robot("pz1").delay == 0.15 and comp.robot("pz2").delay == 0.3
+    assert comp.robot("pz3").delay == 0.0
+    only = ActuatorModel().add_for_robot("pz2", "heading_offset", {"offset_rad": 0.1})
+    comp = Compensation.create(only, ["pz1", "pz2"], SETTINGS)
+    assert comp.robot("pz1") is None and comp.body_yaw("pz1", 0.0, 0.5) == 0.5
+    assert comp.body_yaw("pz2", 0.0, 0.5) == pytest.approx(0.4)
+    assert isinstance(Compensation.create(only, ["pz1"], SETTINGS), NullCompensation)
+
+
+def test_acceleration_limited_inverse_reaches_the_plan_or_ramps():
+    from puzzlebot_common.effects import lag_response
+    from puzzlebot_mpc.compensation import lag_inverse
+
+    for y0, target, tau, a in ((0.0, 0.03, 0.1, 0.4), (0.05, 0.02, 0.1, 0.4), (0.0, 0.03, 0.0, 0.4)):
+        u = lag_inverse(target, y0, tau, a, 0.1)
+        assert lag_response(y0, u, tau, a, 0.1)[2] == pytest.approx(target, abs=1e-9)
+    u = lag_inverse(0.1, 0.0, 0.1, 0.4, 0.1)          # 0.1 m/s in 0.1 s needs 1 m/s^2: ramp all the way
+    assert lag_response(0.0, u, 0.1, 0.4, 0.1)[2] == pytest.approx(0.04)

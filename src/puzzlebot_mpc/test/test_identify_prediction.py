@@ -21,8 +21,14 @@ from puzzlebot_mpc.identify.data import RobotData
 from puzzlebot_common.model import unicycle_arc
 
 ALL = {"input_delay": {"delay_s": 0.087}, "deadband": {"v_min": 0.01, "w_min": 0.1},
-       "velocity_scale": {"k_v": 0.9, "k_w": 1.1}, "velocity_lag": {"tau_v_s": 0.12, "tau_w_s": 0.07},
-       "yaw_rate_bias": {"w_per_v": 0.5, "w0": 0.02}, "heading_offset": {"offset_rad": 0.05}}
+       "friction_offset": {"v_c": 0.004, "w_c": 0.05}, "velocity_scale": {"k_v": 0.9, "k_w": 1.1},
+       "velocity_lag": {"tau_v_s": 0.12, "tau_w_s": 0.07}, "accel_limit": {"a_v": 0.4, "a_w": 8.0},
+       "gain_drift": {"rate_per_s": -0.004}, "yaw_rate_bias": {"w_per_v": 0.5, "w0": 0.02},
+       "heading_offset": {"offset_rad": 0.05}}
+#: The same without the acceleration limit (the linear path of the vectorised plant).
+LINEAR = {k: v for k, v in ALL.items() if k != "accel_limit"}
+#: An acceleration limit without a lag (velocities ramp to their targets).
+RAMP = dict(LINEAR, accel_limit={"a_v": 0.3, "a_w": 6.0}, velocity_lag={"tau_v_s": 0.0, "tau_w_s": 0.0})
 
 
 def commands(seed=0, duration=12.0):
@@ -40,9 +46,10 @@ def step_plant(model, cmds, dt, t_end):
     return np.array(out)
 
 
-def test_plant_is_exact_for_any_step():
+@pytest.mark.parametrize("effects", [ALL, LINEAR, RAMP], ids=["all", "linear", "ramp"])
+def test_plant_is_exact_for_any_step(effects):
     """Mean velocities over coarse steps equal the averages of fine steps: no dt dependence."""
-    model, cmds = synth.model_of(ALL), commands()
+    model, cmds = synth.model_of(effects), commands()
     fine = step_plant(model, cmds, 0.001, 10.0)
     for coarse in (0.01, 0.05):
         k = int(round(coarse / 0.001))
@@ -61,8 +68,9 @@ def test_plant_mean_velocity_of_a_lag():
     assert plant.v == pytest.approx(0.1 * (1 - math.exp(-1)))
 
 
-def test_vectorised_plant_matches_the_plant():
-    model, cmds = synth.model_of(ALL), commands(1)
+@pytest.mark.parametrize("effects", [ALL, LINEAR, RAMP], ids=["all", "linear", "ramp"])
+def test_vectorised_plant_matches_the_plant(effects):
+    model, cmds = synth.model_of(effects), commands(1)
     dt, n = 0.01, 1000
     ref = step_plant(model, cmds, dt, n * dt)
     t, v, w = (np.array(c) for c in zip(*cmds))
@@ -94,17 +102,16 @@ def noise_free_robot(effects, seed=3, duration=40.0):
                            drop=0.0)
     r = rec["pz1"]
     t, v, w = (np.array(c) for c in zip(*r["cmd"]))
-    return RobotData("pz1", r["t"], r["x"], r["y"], r["yaw"], t, v, w), r["cmd"]
+    return RobotData("pz1", r["t"], r["x"], r["y"], r["yaw"], t, v, w, t_start=float(r["t"][0])), r["cmd"]
 
 
 def test_metric_of_the_true_model_on_noise_free_data_is_zero():
     settings = IdentifySettings()
     robot, _ = noise_free_robot(ALL)
     model = synth.model_of(ALL)
-    fit, val = engine.fit_and_validation_windows(robot, settings)
-    for w in (fit, val):
-        ep, ey = engine.errors(model.all_params(), robot, w)
-        assert np.max(np.abs(ep)) < 1e-5 and np.max(np.abs(ey)) < 1e-6
+    val = engine.robot_windows(robot, settings)
+    ep, ey = engine.errors(model.all_params(), robot, val)
+    assert np.max(np.abs(ep)) < 1e-5 and np.max(np.abs(ey)) < 1e-6
     ep, _ = engine.errors(ActuatorModel().all_params(), robot, val)
     assert np.sqrt(np.mean(np.abs(ep) ** 2)) > 1e-3                  # the nominal model is wrong
 
@@ -114,12 +121,13 @@ def test_metric_agrees_with_actuator_state_and_predict():
     settings = IdentifySettings()
     robot, cmds = noise_free_robot(ALL, seed=4)
     model = synth.model_of(ALL)
-    _, val = engine.fit_and_validation_windows(robot, settings)
+    val = engine.robot_windows(robot, settings)
     pos, yaw = engine.predict(model.all_params(), robot, val)
     for i in range(0, len(val), 37):
         ts, te = val.ts[i], val.te[i]
         state = actuator_state(model, cmds, ts, history_s=settings.history_s)
         pose0 = (val.p_start[i].real, val.p_start[i].imag, val.yaw_start[i])
-        out = predict(model, pose0, state, [c for c in cmds if c[0] <= te], te - ts, 1, max_substep=0.005)
+        out = predict(model, pose0, state, [c for c in cmds if c[0] <= te], te - ts, 1, max_substep=0.005,
+                      t_start=robot.t_start)
         assert abs(out[1, 0] + 1j * out[1, 1] - pos[i]) < 1e-5
         assert abs(math.remainder(out[1, 2] - yaw[i], 2 * math.pi)) < 1e-6

@@ -1,3 +1,4 @@
+import math
 import os
 from dataclasses import asdict
 
@@ -17,7 +18,7 @@ def test_shipped_config_holds_the_defaults():
 
 
 @pytest.mark.parametrize("data, fragment", [
-    ({"fit_fraction": 1.0}, "fit_fraction: must be in (0, 1)"),
+    ({"cv_folds": 1}, "cv_folds: must be >= 2"),
     ({"horizon_s": 0.0}, "horizon_s: must be > 0"),
     ({"grid_dt_s": 0.5}, "grid_dt_s (0.5) must be <= window_stride_s"),
     ({"residual_lags": 2.5}, "expected an integer"),
@@ -33,7 +34,8 @@ def test_parameters_at_a_search_bound_are_flagged():
     from puzzlebot_common.effects import NOMINAL
     from puzzlebot_mpc.identify import core, fit
 
-    params = dict(NOMINAL, delay_s=fit.PARAM_SPECS["delay_s"][1], tau_v_s=0.0, tau_w_s=0.1)
-    sel = fit.Selection(["input_delay", "velocity_lag"], params, [], [], None, None)
-    warnings = core.bound_warnings(sel)
-    assert len(warnings) == 1 and "input_delay.delay_s = 0.5 is at the bound" in warnings[0]
+    params = dict(NOMINAL, delay_s=fit.PARAM_SPECS["delay_s"].upper, tau_v_s=0.0, tau_w_s=0.1, a_v=math.inf)
+    sel = fit.Selection(["input_delay", "velocity_lag", "accel_limit"], [params], [], [], None, None,
+                        shared=["input_delay", "velocity_lag", "accel_limit"])
+    warnings = core.bound_warnings(sel, ["pz1"])
+    assert len(warnings) == 1 and "input_delay.delay_s = 0.5 (all robots) is at the bound" in warnings[0]

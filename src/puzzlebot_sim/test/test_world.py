@@ -288,3 +288,19 @@ def test_resting_anchor_is_frozen_follows_its_robot_and_wakes_when_approached():
         assert [(p.anchor_robot, p.opening_robot, p.status) for p in w.physical_pairs()] == [("a", "o", HEAD_INSERTED)]
         w.reset_anchor("o", 0.2)                     # experiments may reset a frozen anchor
         assert "o" not in w.resting_anchors()
+
+
+def test_actuator_effects_per_robot():
+    """model.yaml robots: entries: each robot's plant is its own model (pz2's delay replaces the shared
+    one; pz3's own empty-effect model leaves it ideal)."""
+    model = ActuatorModel().add("input_delay", {"delay_s": 0.3})
+    model.add_for_robot("pz2", "input_delay", {"delay_s": 0.05})
+    model.add_for_robot("pz3", "input_delay", {"delay_s": 0.0})
+    starts = [RobotStart("pz1", 0, 0, 0), RobotStart("pz2", 0, 0.3, 0), RobotStart("pz3", 0, 0.6, 0)]
+    with SimWorld(RobotParams(), starts, actuator_model=model) as w:
+        for n in ("pz1", "pz2", "pz3"):
+            w.set_command(n, 0.05, 0.0)
+        w.run(0.1)
+        assert w.driven_velocity("pz1") == (0.0, 0.0)
+        assert w.driven_velocity("pz2") == pytest.approx((0.05, 0.0))
+        assert w.driven_velocity("pz3") == pytest.approx((0.05, 0.0))

@@ -1,16 +1,16 @@
 """The loop closed, end to end in the Bullet simulation (no roscore).
 
 1. **Inject** actuator and measurement effects into the simulation, unknown
-   to the controller (``config/loop_demo.yaml``: an input delay and a motor
-   lag through an ``ActuatorPlant``, a wheel imbalance, a mocap heading
-   offset, mocap noise and dropped samples).
+   to the controller (``config/loop_demo.yaml``: input delays that differ
+   between the robots and a motor lag through each robot's ``ActuatorPlant``,
+   a wheel imbalance, a mocap heading offset, mocap noise and dropped samples).
 2. **Record** a run of the plain-unicycle MPC on a tracking task (robots
    visiting random goals) as a ROS bag, as ``record.launch`` would:
    ``/vicon/<r>/<r>`` (the mocap measurements, 100 Hz) and ``/<r>/cmd_vel``
    (the commands, 10 Hz).
 3. **Identify** the effects in the bag with ``identify_model``'s core (it is
    told nothing about the injected effects) and write ``model.yaml``.
-4. **Rerun** the same seeds with the MPC planning with the identified model,
+4. **Rerun** the same seeds with the MPC planning with the identified model (each robot its own),
    with the plain unicycle, and with the injected effects as the reference
    ("true model"); report tracking errors measured on the simulated bodies
    (not the mocap), and coupling success of two robots with their anchors.
@@ -156,7 +156,7 @@ def make_world(demo, injected, starts, seed, anchors):
     mocap = MocapModel(demo.mocap_position_std, demo.mocap_yaw_std, demo.mocap_dropout, demo.mocap_heading_offset)
     return SimWorld(RobotParams(), starts, physics_rate=demo.physics_rate,
                     anchor_params=AnchorParams() if anchors else None, seed=seed,
-                    actuator_model=injected if injected.effects else None,
+                    actuator_model=injected if injected.has_effects() else None,
                     wheel_imbalance=demo.wheel_imbalance, mocap=mocap)
 
 
@@ -333,7 +333,7 @@ def coupling_trial(cfg, model, seed, trial, trials):
     demo = cfg.demo
     rng = np.random.default_rng([seed, trial])
     offset = demo.couple_offset_max * trial / max(1, trials - 1)
-    names = ["c1", "c2"]
+    names = ["pz1", "pz2"]      # named like the tracking robots: each has its own injected and identified model
     starts = [RobotStart(names[0], 0.0, 0.0, float(rng.uniform(-demo.couple_yaw, demo.couple_yaw))),
               RobotStart(names[1], -demo.couple_gap, offset, float(rng.uniform(-demo.couple_yaw, demo.couple_yaw)))]
     settings = mpc_settings(demo)
@@ -374,6 +374,30 @@ def summarize(runs, demo):
             "cross_rms_mm": float(np.sqrt(np.mean([x["cross_rms_mm"] ** 2 for x in m]))),
             "outside_after_reach": float(np.mean([x["outside_after_reach"] for x in reached])) if reached else 1.0,
             "failed_steps": int(sum(r["failed_steps"] for r in runs))}
+
+
+def summarize_robots(runs, demo):
+    """summarize() per robot: {robot: summary}."""
+    robots = sorted({x["robot"] for r in runs for x in r["metrics"]})
+    return {n: summarize([dict(r, metrics=[x for x in r["metrics"] if x["robot"] == n], failed_steps=0)
+                          for r in runs], demo) for n in robots}
+
+
+def robot_table(labels, per_robot, cfg, identified):
+    """Markdown table: each robot's injected delay, identified delay, and goals held / error at the end
+    under each controller (before / after per robot)."""
+    keys = [(k, lab) for k, lab in labels if k in (PLAIN, IDENTIFIED, TRUE) and k in per_robot]
+    head = "| robot | injected delay [s] | identified delay [s] | " + " | ".join(
+        "%s: held, error mean / max [mm]" % lab for _, lab in keys) + " |"
+    rows = [head, "|---|---|---|" + "---|" * len(keys)]
+    for robot in sorted(per_robot[PLAIN]):
+        ident = identified.for_robot(robot).param("delay_s") if identified is not None else 0.0
+        cells = ["%d / %d, %.2f / %.2f" % (per_robot[k][robot]["held"], per_robot[k][robot]["legs"],
+                                           per_robot[k][robot]["steady_mean_mm"], per_robot[k][robot]["steady_max_mm"])
+                 for k, _ in keys]
+        rows.append("| %s | %.3f | %.3f | %s |" % (robot, cfg.true_model.for_robot(robot).param("delay_s"), ident,
+                                                   " | ".join(cells)))
+    return "\n".join(rows)
 
 
 def summarize_coupling(trials):
@@ -515,7 +539,12 @@ def variants(cfg, identified, clean=True, ablation=False):
            (TRUE, "true model (reference)", cfg, cfg.true_model)]
     if ablation:
         for e in cfg.true_model.effects:
-            out.append(("only_" + e.name, "true model, only %s" % e.name, cfg, ActuatorModel().add(e.name, e.params)))
+            only = ActuatorModel().add(e.name, e.params)
+            for robot, own in cfg.true_model.robots.items():      # each robot's own value of that effect
+                for mine in own.effects:
+                    if mine.name == e.name:
+                        only.add_for_robot(robot, e.name, mine.params)
+            out.append(("only_" + e.name, "true model, only %s" % e.name, cfg, only))
     if clean:
         out.append((CLEAN, "plain MPC, nothing injected", clean_config(cfg), None))
     return out
@@ -552,7 +581,7 @@ def run(cfg, seeds, record_seed, out_dir, jobs=1, coupling=True, ablation=False,
     with open(os.path.join(out_dir, "identify_report.json"), "w") as f:
         json.dump(report.report_dict(ident), f, indent=1)
     say(report.table(ident))
-    identified = ident.model if ident.model.effects else None
+    identified = ident.model if ident.model.has_effects() else None
     todo = variants(cfg, identified, ablation=ablation)
     labels = [(k, lab) for k, lab, _, _ in todo]
     say("3. tracking, seeds %s: %s" % (",".join(map(str, seeds)), "; ".join(lab for _, lab in labels)))
@@ -562,6 +591,7 @@ def run(cfg, seeds, record_seed, out_dir, jobs=1, coupling=True, ablation=False,
     results = list(mapper(_tracking_job, jobs_list))
     runs = {k: results[i * len(seeds):(i + 1) * len(seeds)] for i, (k, _, _, _) in enumerate(todo)}
     summary = {k: summarize(runs[k], demo) for k in runs}
+    per_robot = {k: summarize_robots(runs[k], demo) for k in runs}
     couple, trials = None, None
     if coupling and demo.couple_trials > 0:
         n = demo.couple_trials
@@ -576,13 +606,15 @@ def run(cfg, seeds, record_seed, out_dir, jobs=1, coupling=True, ablation=False,
         pool.shutdown()
     say("")
     say(table(labels, summary, couple))
+    say("")
+    say(robot_table(labels, per_robot, cfg, identified))
     fig = figure_path or os.path.join(out_dir, "loop_demo.png")
     figure(fig, runs, summary, labels, cfg, identified, trials)
     result = {"injected": cfg.injected.to_dict(), "true_model": cfg.true_model.to_dict(),
               "identified_model": ident.model.to_dict(), "identify_rmse": {
                   "before": report.report_dict(ident)["before"], "after": report.report_dict(ident)["after"]},
               "demo": asdict(demo), "seeds": seeds, "record_seed": record_seed, "labels": labels,
-              "summary": summary, "coupling": couple,
+              "summary": summary, "per_robot": per_robot, "coupling": couple,
               "per_run": {k: [{key: r[key] for key in ("seed", "metrics", "failed_steps")} for r in runs[k]]
                           for k in runs},
               "coupling_trials": trials, "wall_s": round(time.time() - t_start, 1)}

@@ -117,12 +117,12 @@ class ControlLoop:
         self._pending = []              # (request id, BehaviorRequest) waiting to start, in order
         self.mpc = MultiRobotMPC(settings, len(self.names)).setup()
         self._last_cmd = np.zeros((len(self.names), 2))
-        # Identified actuator effects (effects.ActuatorModel), None = plain unicycle: see compensation.py.
+        # Identified actuator effects (effects.ActuatorModel), per robot; a null compensation without
+        # one (the plain unicycle): see compensation.py.
         self.compensation = Compensation.create(actuator_model, self.names, settings)
 
     def on_pose(self, name, stamp, x, y, yaw, quaternion=None, z=0.0):
-        if self.compensation is not None:      # actuator model: measured yaw -> body heading
-            yaw = self.compensation.body_yaw(yaw)
+        yaw = self.compensation.body_yaw(name, stamp, yaw)     # measured yaw -> body heading
         return self.poses.update(name, stamp, x, y, yaw, quaternion, z)
 
     def fresh_poses(self, now):
@@ -194,8 +194,7 @@ class ControlLoop:
             self._last_cmd[:] = 0.0
             result = MPCResult(np.zeros((n, 2)), np.zeros((n, self.settings.horizon + 1, NX)),
                                False, "no fresh pose for any robot", 0.0, 0, float("nan"), fallback="stop")
-            if self.compensation is not None:  # actuator model: remember the zero commands
-                self.compensation.to_commands(result, now, stale)
+            self.compensation.to_commands(result, now, stale)     # remember the zero commands
             return self._output(result, status, stale, poses, newly, lost)
         if self.behaviors.coupling():
             self.pairs.assign_active(poses)
@@ -211,9 +210,9 @@ class ControlLoop:
                 pose = (latest.x, latest.y, latest.yaw) if latest else (0.0, 0.0, 0.0)
             x0[i, :3] = pose
             x0[i, 3:] = self._last_cmd[i]
-        if self.compensation is not None:      # actuator model: plan from where the robots will be
-            self.compensation.initial_states(x0, now, {m: self.poses.latest(m).stamp for m in self.names
-                                                       if m not in stale}, stale)
+        # actuator model: plan from where the robots will be
+        self.compensation.initial_states(x0, now, {m: self.poses.latest(m).stamp for m in self.names
+                                                   if m not in stale}, stale)
         if stale:
             for p in obj.pairs:     # no alignment towards a robot whose pose is unknown
                 if self.names[p.i] in stale or self.names[p.j] in stale:
@@ -226,8 +225,7 @@ class ControlLoop:
             if poses[name] is None:
                 result.commands[i] = 0.0
         self._last_cmd = result.commands.copy()
-        if self.compensation is not None:      # actuator model: planned velocities -> commands
-            self.compensation.to_commands(result, now, stale)
+        self.compensation.to_commands(result, now, stale)         # actuator model: planned velocities -> commands
         return self._output(result, status, stale, poses, newly, lost)
 
     def _output(self, result, status, stale, poses, newly, lost):

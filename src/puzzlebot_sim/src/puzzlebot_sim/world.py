@@ -169,8 +169,9 @@ class SimWorld(BulletSession):
     ``gui``; keyword-only: ``anchor_params`` (AnchorParams, None = robots
     without anchors), ``world_params`` (WorldParams), ``solver_iterations``,
     ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
-    puzzlebot_common.effects.ActuatorModel applied to every robot's commands,
-    None = ideal), ``wheel_imbalance`` (right wheel x (1 + k), left x (1 - k)),
+    puzzlebot_common.effects.ActuatorModel applied to each robot's commands,
+    its ``robots:`` entries by robot name; None = ideal), ``wheel_imbalance``
+    (right wheel x (1 + k), left x (1 - k)),
     ``mocap`` (puzzlebot_sim.mocap.MocapModel), ``anchor_rest`` (AnchorRestParams:
     when resting anchors are frozen to their robot, puzzlebot_sim.anchor_rest; off
     with the GUI, which would not show them), ``tilted_solver_iterations`` (solver
@@ -244,12 +245,14 @@ class SimWorld(BulletSession):
             self._rest = NoAnchorRest()
 
     # ----------------------------------------------------------------- setup
-    def _make_plant(self):
-        if self._actuator_model is None:
+    def _make_plant(self, name):
+        """The robot's actuator plant: its own model (``ActuatorModel.for_robot``), None if it has no effect."""
+        model = self._actuator_model.for_robot(name) if self._actuator_model is not None else None
+        if model is None or not model.effects:
             return None
         from puzzlebot_common.effects import ActuatorPlant
 
-        return ActuatorPlant(self._actuator_model)
+        return ActuatorPlant(model)
 
     def _set_group(self, body, link, group):
         pb.setCollisionFilterGroupMask(body, link, group, _MASKS[group], physicsClientId=self.client)
@@ -295,7 +298,7 @@ class SimWorld(BulletSession):
         robot = SimRobot(s.name, body, wheels, n_left, s.pilot)
         if self.anchor_params is not None:
             robot.anchor = self._spawn_anchor(s, z0)
-        robot.plant = self._make_plant()
+        robot.plant = self._make_plant(s.name)
         return robot
 
     def _spawn_anchor(self, s, z0):

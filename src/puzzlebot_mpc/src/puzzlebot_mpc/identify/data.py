@@ -22,9 +22,10 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from puzzlebot_common import names
-from puzzlebot_common.geometry import wrap_angle, yaw_from_quaternion
+from puzzlebot_common.geometry import wrap_angle
 
 CSV_COLUMNS = ("t", "robot", "x", "y", "yaw", "v_cmd", "w_cmd")
+CSV_COMMAND_TIME = "t_cmd"   # optional column: when the command in force on the row was issued [s]
 POSE_TYPE = "geometry_msgs/TransformStamped"
 CMD_TYPE = "geometry_msgs/Twist"
 CSV_GAP_PERIODS = 1.5   # a gap between a robot's rows longer than this many median periods hides commands
@@ -56,6 +57,7 @@ class RobotData:
     cmd_v: np.ndarray
     cmd_w: np.ndarray
     cmd_unknown: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    t_start: float = 0.0    # s: the robot's first pose sample in the file (where a drifting gain is 1)
 
     @property
     def duration(self):
@@ -68,6 +70,7 @@ class Dataset:
     robots: List[RobotData]
     t0: float          # absolute time [s] subtracted from every time
     kind: str = "bag"  # "bag" or "csv"
+    exact_command_times: bool = True   # False: a CSV without t_cmd (command times to a pose period)
 
     def robot_names(self):
         return [r.name for r in self.robots]
@@ -112,11 +115,6 @@ def check_robot(r, path):
 
 
 # ----------------------------------------------------------------------- bag
-def _bag_topics(bag, path):
-    info = bag.get_type_and_topic_info()
-    return {name: (t.msg_type, t.message_count) for name, t in info.topics.items()}
-
-
 def _discover(topics, path):
     """Robot name -> (vicon topic, cmd topic) from topic names."""
     subjects = []
@@ -153,57 +151,50 @@ def write_messages(path, messages):
 
 
 def read_bag(path, robots=None):
-    import rosbag
+    """Poses and commands of a ROS 1 bag, read by the fast reader (bagfile.py: no ROS, no
+    per-message Python)."""
+    from puzzlebot_mpc.identify import bagfile
 
     if os.path.getsize(path) == 0:
         raise DataError("%s: empty file (not a ROS bag)" % path)
     try:
-        bag = rosbag.Bag(path)
-    except (rosbag.ROSBagException, OSError, ValueError) as e:
+        topics, _ = bagfile.read(path, set())
+    except (bagfile.BagError, OSError) as e:
         raise DataError("%s: not a readable ROS bag: %s" % (path, e)) from None
-    with bag:
-        topics = _bag_topics(bag, path)
-        if sum(count for _, count in topics.values()) == 0:
-            raise DataError("%s: empty bag (no messages)" % path)
-        if robots:
-            pairs = {}
-            for spec in robots:
-                pose, cmd = spec.vicon_topic, names.cmd_vel_topic(spec.name)
-                for topic in (pose, cmd):
-                    if topic not in topics:
-                        raise DataError("%s: robot %s: topic %s is not in the bag" % (path, spec.name, topic))
-                pairs[spec.name] = (pose, cmd)
-        else:
-            pairs = _discover(topics, path)
-        for name, (pose, cmd) in pairs.items():
-            for topic, wanted in ((pose, POSE_TYPE), (cmd, CMD_TYPE)):
-                if topics[topic][0] != wanted:
-                    raise DataError("%s: robot %s: %s has type %s, expected %s"
-                                    % (path, name, topic, topics[topic][0], wanted))
-        by_topic = {}
-        for name, (pose, cmd) in pairs.items():
-            by_topic[pose] = (name, "pose")
-            by_topic[cmd] = (name, "cmd")
-        poses = {n: [] for n in pairs}
-        cmds = {n: [] for n in pairs}
-        try:
-            for topic, msg, t in bag.read_messages(topics=list(by_topic)):
-                name, kind = by_topic[topic]
-                if kind == "pose":
-                    st = msg.header.stamp
-                    tr, q = msg.transform.translation, msg.transform.rotation
-                    poses[name].append((st.secs + 1e-9 * st.nsecs, t.to_sec(), tr.x, tr.y,
-                                        yaw_from_quaternion(q.x, q.y, q.z, q.w)))
-                else:
-                    cmds[name].append((t.to_sec(), msg.linear.x, msg.angular.z))
-        except (rosbag.ROSBagException, OSError, ValueError) as e:
-            raise DataError("%s: cannot read the bag's messages: %s" % (path, e)) from None
+    if sum(count for _, count in topics.values()) == 0:
+        raise DataError("%s: empty bag (no messages)" % path)
+    if robots:
+        pairs = {}
+        for spec in robots:
+            pose, cmd = spec.vicon_topic, names.cmd_vel_topic(spec.name)
+            for topic in (pose, cmd):
+                if topic not in topics:
+                    raise DataError("%s: robot %s: topic %s is not in the bag" % (path, spec.name, topic))
+            pairs[spec.name] = (pose, cmd)
+    else:
+        pairs = _discover(topics, path)
+    for name, (pose, cmd) in pairs.items():
+        for topic, wanted in ((pose, POSE_TYPE), (cmd, CMD_TYPE)):
+            if topics[topic][0] != wanted:
+                raise DataError("%s: robot %s: %s has type %s, expected %s"
+                                % (path, name, topic, topics[topic][0], wanted))
+    try:
+        _, messages = bagfile.read(path, {t for pair in pairs.values() for t in pair})
+    except (bagfile.BagError, OSError) as e:
+        raise DataError("%s: cannot read the bag's messages: %s" % (path, e)) from None
     out = []
-    for name in pairs:
-        p = np.array(poses[name], dtype=float).reshape(-1, 5)
-        c = np.array(cmds[name], dtype=float).reshape(-1, 3)
-        if p.shape[0] == 0:
-            raise DataError("%s: robot %s: no pose messages on %s" % (path, name, pairs[name][0]))
+    for name, (pose, cmd) in pairs.items():
+        if pose not in messages:
+            raise DataError("%s: robot %s: no pose messages on %s" % (path, name, pose))
+        t_rec, m = messages[pose]
+        qx, qy, qz, qw = m[:, 4], m[:, 5], m[:, 6], m[:, 7]
+        yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        p = np.column_stack([m[:, 0], t_rec, m[:, 1], m[:, 2], yaw])
+        if cmd in messages:
+            t_cmd, tw = messages[cmd]
+            c = np.column_stack([t_cmd, tw[:, 0], tw[:, 5]])
+        else:
+            c = np.zeros((0, 3))
         if np.all(p[:, 0] == 0.0):
             warn("%s: robot %s: pose header stamps are all zero; using the record time" % (path, name))
             p[:, 0] = p[:, 1]
@@ -216,7 +207,7 @@ def read_bag(path, robots=None):
     return _dataset(path, out)
 
 
-def _dataset(path, items, unknown=None, kind="bag"):
+def _dataset(path, items, unknown=None, kind="bag", exact=True):
     """items: (name, poses (t, _, x, y, yaw), commands (t, v, w)) with absolute times;
     unknown: name -> (k, 2) intervals of unknown command timing."""
     starts = [p[0, 0] for _, p, _ in items] + [c[0, 0] for _, _, c in items if c.shape[0]]
@@ -227,17 +218,22 @@ def _dataset(path, items, unknown=None, kind="bag"):
         c = c[order]
         gaps = (unknown or {}).get(name, np.zeros((0, 2))) - t0
         robots.append(RobotData(name=name, t=p[:, 0] - t0, x=p[:, 2], y=p[:, 3], yaw=p[:, 4],
-                                cmd_t=c[:, 0] - t0, cmd_v=c[:, 1], cmd_w=c[:, 2], cmd_unknown=gaps))
-    return Dataset(path=path, robots=robots, t0=t0, kind=kind)
+                                cmd_t=c[:, 0] - t0, cmd_v=c[:, 1], cmd_w=c[:, 2], cmd_unknown=gaps,
+                                t_start=float(p[0, 0] - t0) if p.shape[0] else 0.0))
+    return Dataset(path=path, robots=robots, t0=t0, kind=kind, exact_command_times=exact)
 
 
 # ----------------------------------------------------------------------- csv
 def read_csv(path, robots=None):
     """CSV rows -> per-robot poses and command events.
 
-    A command seen first on a row is taken as issued midway between that row
-    and the robot's previous row (the row only says it was in force by then).
-    An empty v_cmd/w_cmd cell means no command known yet.
+    The command in force on a row was issued at the row's ``t_cmd`` if the file
+    has that column (exact, like a bag). Without it, the documented convention:
+    a command seen first on a row is taken as issued midway between that row and
+    the robot's previous row (the row only says it was in force by then; right
+    on average for commands issued independently of the pose rows, half a pose
+    period early for commands logged on the pose rows). An empty v_cmd/w_cmd
+    cell means no command known yet.
     """
     with open(path, newline="") as f:
         reader = csv.reader(f)
@@ -252,7 +248,9 @@ def read_csv(path, robots=None):
         if missing:
             raise DataError("%s: missing CSV column(s) %s (header: %s; expected %s)"
                             % (path, ", ".join(missing), ",".join(header), ",".join(CSV_COLUMNS)))
-        col = {c: header.index(c) for c in CSV_COLUMNS}
+        numeric = ["t", "x", "y", "yaw", "v_cmd", "w_cmd"] + ([CSV_COMMAND_TIME] if CSV_COMMAND_TIME in header else [])
+        col = {c: header.index(c) for c in list(CSV_COLUMNS) + numeric}
+        optional = ("v_cmd", "w_cmd", CSV_COMMAND_TIME)
         rows = {}
         try:
             for line_no, row in enumerate(reader, start=2):
@@ -261,9 +259,9 @@ def read_csv(path, robots=None):
                 if len(row) < len(header):
                     raise DataError("%s: line %d: %d fields, the header has %d" % (path, line_no, len(row), len(header)))
                 vals = []
-                for c in ("t", "x", "y", "yaw", "v_cmd", "w_cmd"):
+                for c in numeric:
                     cell = row[col[c]].strip()
-                    if cell == "" and c in ("v_cmd", "w_cmd"):
+                    if cell == "" and c in optional:
                         vals.append(math.nan)
                         continue
                     try:
@@ -287,6 +285,7 @@ def read_csv(path, robots=None):
             chosen.append(spec.name)
     else:
         chosen = sorted(rows)
+    with_time = CSV_COMMAND_TIME in header
     items, unknown = [], {}
     for name in chosen:
         a = np.array(rows[name], dtype=float)
@@ -299,21 +298,54 @@ def read_csv(path, robots=None):
         if not np.any(has_cmd):
             raise DataError("%s: robot %s has no commands (v_cmd, w_cmd empty on every row)" % (path, name))
         t, cv, cw = a[:, 1], a[:, 5], a[:, 6]
+        if with_time:
+            events = _csv_timed_events(path, name, a, has_cmd)
+        else:
+            events = _csv_events(t, cv, cw, has_cmd)
         period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        events, gaps = [], []
-        prev = None
+        gaps, prev = [], None
         for i in np.nonzero(has_cmd)[0]:
-            cmd = (cv[i], cw[i])
-            if cmd != prev:
-                t_issue = t[i] if (prev is None or i == 0) else 0.5 * (t[i - 1] + t[i])
-                events.append((t_issue, cmd[0], cmd[1]))
-                if prev is not None and i > 0 and t[i] - t[i - 1] > CSV_GAP_PERIODS * period:
-                    gaps.append((t[i - 1], t[i]))
-                prev = cmd
+            cmd = (cv[i], cw[i]) if not with_time else a[i, 7]
+            if prev is not None and cmd != prev and i > 0 and t[i] - t[i - 1] > CSV_GAP_PERIODS * period:
+                gaps.append((t[i - 1], t[i]))
+            prev = cmd
         poses = np.column_stack([t, t, a[:, 2], a[:, 3], a[:, 4]])
         items.append((name, poses, np.array(events, dtype=float).reshape(-1, 3)))
         unknown[name] = np.array(gaps, dtype=float).reshape(-1, 2)
-    return _dataset(path, items, unknown, kind="csv")
+    return _dataset(path, items, unknown, kind="csv", exact=with_time)
+
+
+def _csv_events(t, cv, cw, has_cmd):
+    """Command events (t_issue, v, w) by the convention: issued midway between the row where a
+    command first appears and the row before."""
+    events, prev = [], None
+    for i in np.nonzero(has_cmd)[0]:
+        cmd = (cv[i], cw[i])
+        if cmd != prev:
+            t_issue = t[i] if (prev is None or i == 0) else 0.5 * (t[i - 1] + t[i])
+            events.append((t_issue, cmd[0], cmd[1]))
+            prev = cmd
+    return events
+
+
+def _csv_timed_events(path, name, a, has_cmd):
+    """Command events from the t_cmd column: one per distinct issue time, checked (issued at or
+    before its row, never earlier than the previous command)."""
+    events, prev = [], None
+    for i in np.nonzero(has_cmd)[0]:
+        line, t, tc = int(a[i, 0]), a[i, 1], a[i, 7]
+        if not math.isfinite(tc):
+            raise DataError("%s: line %d: robot %s: a command without its %s" % (path, line, name, CSV_COMMAND_TIME))
+        if tc > t + 1e-9:
+            raise DataError("%s: line %d: robot %s: %s=%r is after the row's t=%r (the command in force on a "
+                            "row was issued at or before it)" % (path, line, name, CSV_COMMAND_TIME, tc, t))
+        if prev is not None and tc < prev - 1e-9:
+            raise DataError("%s: line %d: robot %s: %s goes backwards (%r after %r)"
+                            % (path, line, name, CSV_COMMAND_TIME, tc, prev))
+        if prev is None or tc > prev + 1e-9:
+            events.append((tc, a[i, 5], a[i, 6]))
+            prev = tc
+    return events
 
 
 # -------------------------------------------------------------- mocap glitches

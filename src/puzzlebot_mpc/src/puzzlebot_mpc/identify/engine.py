@@ -47,10 +47,17 @@ class Windows:
     fs: np.ndarray
     ke: np.ndarray
     fe: np.ndarray
-    cache: dict = field(default_factory=dict, repr=False)   # delay -> command pieces of the grid
+    cache: dict = field(default_factory=dict, repr=False)   # delay -> command pieces of the grid, and
+                                                             # ("memo", delay) -> their component memo
+    part: np.ndarray = None   # cross-validation part (fold) of each window
+    edges: np.ndarray = None  # time edges [s] of the parts (len = parts + 1)
 
     def __len__(self):
         return int(self.ts.size)
+
+    def fit_mask(self, k):
+        """Windows that may be fitted when part k is held out: none of them overlaps part k in time."""
+        return (self.te <= self.edges[k]) | (self.ts >= self.edges[k + 1])
 
 
 def nearest_samples(t, wanted, tol):
@@ -70,10 +77,6 @@ def median_period(r):
 def usable_start(r, history_s):
     """Earliest window start: the record's start plus the command history."""
     return max(float(r.t[0]), float(r.cmd_t[0])) + history_s
-
-
-def split_time(r, fit_fraction):
-    return float(r.t[0] + fit_fraction * (r.t[-1] - r.t[0]))
 
 
 def make_windows(r, t_from, t_to, horizon, stride, settings):
@@ -100,23 +103,27 @@ def make_windows(r, t_from, t_to, horizon, stride, settings):
 def subset(w, mask):
     """The windows selected by a boolean mask (same grid)."""
     per_window = ("ts", "te", "p_start", "p_end", "yaw_start", "yaw_end", "ks", "fs", "ke", "fe")
-    return replace(w, cache={}, **{k: getattr(w, k)[mask] for k in per_window})
+    extra = {"part": w.part[mask]} if w.part is not None else {}
+    return replace(w, cache={}, **{k: getattr(w, k)[mask] for k in per_window}, **extra)
 
 
-def fit_and_validation_windows(r, settings):
-    """(fit windows, validation windows) of a robot; DataError if either is empty."""
-    t0 = usable_start(r, settings.history_s)
-    split = split_time(r, settings.fit_fraction)
-    fit = make_windows(r, t0, split, settings.horizon_s, settings.window_stride_s, settings)
-    val = make_windows(r, max(split, t0), float(r.t[-1]), settings.horizon_s, settings.window_stride_s, settings)
-    for label, w in (("fitting", fit), ("validation", val)):
-        if len(w) == 0:
-            raise DataError("robot %s: no %s window: the record (%.1f s of poses from t=%.1f s, first command at "
-                            "t=%.1f s) is too short or too sparse; each part needs %.1f s of command history "
-                            "plus a %.1f s horizon with pose samples at both ends"
-                            % (r.name, label, r.duration, r.t[0], r.cmd_t[0], settings.history_s,
-                               settings.horizon_s))
-    return fit, val
+def robot_windows(r, settings):
+    """Every prediction window of a robot's usable record, each labelled with its cross-validation
+    part: the record from its usable start cut into ``cv_folds`` equal parts in time. DataError if
+    a part has no window (too short or too sparse)."""
+    t0, t1 = usable_start(r, settings.history_s), float(r.t[-1])
+    w = make_windows(r, t0, t1, settings.horizon_s, settings.window_stride_s, settings)
+    k = settings.cv_folds
+    edges = t0 + (t1 - t0) * np.arange(k + 1) / k
+    w.edges = edges
+    w.part = np.clip(np.searchsorted(edges, w.ts, side="right") - 1, 0, k - 1)
+    counts = np.bincount(w.part, minlength=k) if len(w) else np.zeros(k, int)
+    if np.any(counts == 0) or any(not np.any(w.fit_mask(j)) for j in range(k)):
+        raise DataError("robot %s: the record is too short or too sparse for %d cross-validation parts (%.1f s of "
+                        "poses from t=%.1f s, first command at t=%.1f s); each part needs windows of %.1f s with "
+                        "pose samples at both ends, after %.1f s of command history"
+                        % (r.name, k, r.duration, r.t[0], r.cmd_t[0], settings.horizon_s, settings.history_s))
+    return w
 
 
 def _pieces(r, w, delay):
@@ -124,16 +131,20 @@ def _pieces(r, w, delay):
     parameters far more often than the delay)."""
     cache = w.cache
     if delay not in cache:
-        if len(cache) >= PIECES_CACHE:
-            cache.pop(next(iter(cache)))
+        if len(cache) >= 2 * PIECES_CACHE:       # pieces and their component memos
+            old = next(k for k in cache if not isinstance(k, tuple))
+            cache.pop(old)
+            cache.pop(("memo", old), None)
         cache[delay] = command_pieces(r.cmd_t, delay, w.g0, w.dt, w.n)
     return cache[delay]
 
 
 def predict(params, r, w):
     """Predicted measured pose at each window's end: (complex position, yaw)."""
-    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n,
-                                pieces=_pieces(r, w, params["delay_s"]))
+    pieces = _pieces(r, w, params["delay_s"])
+    memo = w.cache.setdefault(("memo", params["delay_s"]), {})
+    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n, pieces=pieces,
+                                t_start=r.t_start, memo=memo)
     dth = om * w.dt
     theta = np.concatenate([[0.0], np.cumsum(dth)])
     half = 0.5 * dth
@@ -173,7 +184,7 @@ class Metric:
 
 
 def metric(errs):
-    """Pooled RMSE of a list of (position error, yaw error) arrays."""
+    """Pooled RMSE of a list of (position error, yaw error) arrays (a robot's, or one per robot)."""
     ep = np.concatenate([e[0] for e in errs]) if errs else np.zeros(0)
     ey = np.concatenate([e[1] for e in errs]) if errs else np.zeros(0)
     if ep.size == 0:

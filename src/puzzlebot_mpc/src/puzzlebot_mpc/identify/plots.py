@@ -12,8 +12,7 @@ window, the signature of timing effects (delay, lag).
 
 import numpy as np
 
-from puzzlebot_common.effects import NOMINAL
-from puzzlebot_mpc.identify import engine, residuals
+from puzzlebot_mpc.identify import residuals
 
 NOMINAL_STYLE = dict(color="0.6", lw=1.0)
 FIGSIZE = (13.0, 12.0)   # inches
@@ -22,12 +21,8 @@ BARS_NOMINAL = 7         # correlations shown in panel (e): strongest of the nom
 BARS_FINAL = 4           # ... and of the identified model's residual
 
 
-def _validation_errors(result, params):
-    out = []
-    for r, (_, w) in zip(result.dataset.robots, result.problem.windows):
-        ep, ey = engine.errors(params, r, w)
-        out.append((r.name, w.ts, np.abs(ep), ey))
-    return out
+def _validation_errors(result, errors):
+    return [(rf.name, rf.windows.ts, np.abs(ep), ey) for rf, (ep, ey) in zip(result.problem.fits, errors)]
 
 
 def _lagged_corr(analysis, component, command, lags):
@@ -51,17 +46,17 @@ def plot(result, path):
     fig.suptitle("%s\n%s" % (result.path, title), fontsize=11)
 
     # (a), (b) validation errors over time
-    nom = _validation_errors(result, dict(NOMINAL))
-    fin = _validation_errors(result, result.selection.params)
+    nom = _validation_errors(result, result.selection.nominal_errors)
+    fin = _validation_errors(result, result.selection.final_errors)
     for (name, t, ep_n, ey_n), (_, _, ep_f, ey_f) in zip(nom, fin):
         line, = ax[0, 0].plot(t, 1e3 * ep_f, lw=1.0, label="%s identified" % name)
         ax[0, 0].plot(t, 1e3 * ep_n, ls="--", lw=0.8, color=line.get_color(), alpha=0.45)
         ax[0, 1].plot(t, 1e3 * ey_f, lw=1.0, color=line.get_color(), label="%s identified" % name)
         ax[0, 1].plot(t, 1e3 * ey_n, ls="--", lw=0.8, color=line.get_color(), alpha=0.45)
     h = result.settings.horizon_s
-    ax[0, 0].set(title="(a) validation position error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
+    ax[0, 0].set(title="(a) held-out position error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
                  xlabel="window start [s]", ylabel="[mm]")
-    ax[0, 1].set(title="(b) validation yaw error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
+    ax[0, 1].set(title="(b) held-out yaw error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
                  xlabel="window start [s]", ylabel="[mrad]")
     ax[0, 0].legend(fontsize=7)
 

@@ -22,6 +22,7 @@ A structured residual is reported with its strongest significant
 correlations: where to look for an effect the model lacks.
 """
 
+import math
 from dataclasses import dataclass
 from typing import Dict, List
 
@@ -37,6 +38,7 @@ COMMAND_LAG_STEP_S = 0.1   # s: spacing of the lagged-command regressors (the co
 WINDOW_SAMPLES = 11        # samples of the commands within a window (for their mean and change)
 FAMILIES = 3              # test families sharing residual_alpha: autocorrelation, mean, correlations
 TOP_CORRELATIONS = 5       # strongest correlations listed in the report
+SATURATION_LEAD_S = 0.3    # s: command changes this long before a window still act on it (a ramp in progress)
 
 
 @dataclass
@@ -56,6 +58,8 @@ class Analysis:
     r_critical: float
     white: bool
     notes: str
+    time_dependence: dict = None     # diagnose(): gains fitted on early versus late parts
+    saturation: dict = None          # diagnose(): residual against the commanded acceleration
 
     def pooled(self, component):
         return np.concatenate([r.res[component] for r in self.robots])
@@ -96,6 +100,17 @@ def regressors(r, w, settings):
         v, om = engine.command_at(r, w.ts - k * COMMAND_LAG_STEP_S)
         out["v_cmd(ts-%.1fs)" % (k * COMMAND_LAG_STEP_S)] = v
         out["w_cmd(ts-%.1fs)" % (k * COMMAND_LAG_STEP_S)] = om
+    # the command changes acting on the window (from SATURATION_LEAD_S before it): their sum and the sum of
+    # their signed squares (a saturation grows with the square of a change, a timing error linearly)
+    for attr, label in (("cmd_v", "v_cmd"), ("cmd_w", "w_cmd")):
+        d = np.diff(getattr(r, attr))
+        t = r.cmd_t[1:]
+        lin = np.concatenate([[0.0], np.cumsum(d)])
+        sq = np.concatenate([[0.0], np.cumsum(d * np.abs(d))])
+        a = np.searchsorted(t, w.ts - SATURATION_LEAD_S, side="right")
+        b = np.searchsorted(t, w.te, side="right")
+        out["%s changes near window" % label] = lin[b] - lin[a]
+        out["%s changes^2 near window" % label] = sq[b] - sq[a]
     # the measured motion, the heading in the world, time
     dur = w.te - w.ts
     out["measured speed"] = ((w.p_end - w.p_start) * np.exp(-1j * w.yaw_start)).real / dur
@@ -151,9 +166,9 @@ def autocorrelation(x, lags):
 
 
 def analyse(params, robots, settings, windows=None):
-    """Residual analysis of the model ``params`` on every robot's record."""
+    """Residual analysis of the model on every robot's record; ``params``: one parameter dict per robot."""
     windows = windows or [residual_windows(r, settings) for r in robots]
-    per_robot = [robot_residuals(params, r, w, settings) for r, w in zip(robots, windows) if len(w) > 3]
+    per_robot = [robot_residuals(p, r, w, settings) for p, r, w in zip(params, robots, windows) if len(w) > 3]
     alpha = settings.residual_alpha / FAMILIES   # each family of tests gets an equal share
     lb, mean_test = {}, {}
     for c in COMPONENTS:
@@ -218,6 +233,8 @@ def _notes(white, lb, bad_lb, mean_test, bad_mean, sig, per_robot, settings, t_c
 def summary(analysis):
     """JSON-ready summary of an analysis."""
     return {
+        "time_dependence": analysis.time_dependence,
+        "saturation": analysis.saturation,
         "white": bool(analysis.white),
         "notes": analysis.notes,
         "autocorrelation_test": {c: {k: float(v) if k != "dof" else int(v) for k, v in d.items()}
@@ -228,3 +245,115 @@ def summary(analysis):
                                    for d in analysis.correlations[:TOP_CORRELATIONS]],
         "rms": {c: float(np.sqrt(np.mean(analysis.pooled(c) ** 2))) for c in COMPONENTS},
     }
+
+
+# ------------------------------------------------------------ diagnosis
+GAIN_STEP = 1e-3     # relative step of the probe gains' finite differences
+
+
+def _probe_gains(rf, params, settings):
+    """The velocity gains (multipliers of k_v, k_w on top of the model) that best fit each of
+    ``drift_segments`` consecutive parts of a robot's windows (one Gauss-Newton step from 1):
+    [(mid time [s], m_v, m_w)]."""
+    def vector(p):
+        ep, ey = rf.errors(p)
+        return np.stack([ep.real / rf.sigma_pos, ep.imag / rf.sigma_pos, ey / rf.sigma_yaw], axis=1)
+
+    r0 = vector(params)
+    jac = []
+    for key in ("k_v", "k_w"):
+        jac.append((vector(dict(params, **{key: params[key] * (1.0 + GAIN_STEP)})) - r0) / GAIN_STEP)
+    jac = np.stack(jac, axis=2)                      # windows x 3 x 2
+    w = rf.windows
+    edges = np.linspace(w.ts.min(), w.ts.max() + 1e-9, settings.drift_segments + 1)
+    out = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        sel = (w.ts >= a) & (w.ts < b)
+        J = jac[sel].reshape(-1, 2)
+        if sel.sum() < 10 or np.linalg.cond(J.T @ J) > 1e8:
+            continue
+        m = -np.linalg.solve(J.T @ J, J.T @ r0[sel].reshape(-1))
+        out.append((0.5 * (a + b), 1.0 + m[0], 1.0 + m[1]))
+    return out
+
+
+def time_dependence(fits, params, settings):
+    """Do the model's velocity gains change over the record? Gains fitted on consecutive parts of
+    each robot's record, a common linear trend with an intercept per robot (least squares), its
+    t test (two-sided, Bonferroni over v and w)."""
+    rows = [(i, t, mv, mw) for i, (rf, p) in enumerate(zip(fits, params)) for t, mv, mw in _probe_gains(rf, p, settings)]
+    robots = sorted({r[0] for r in rows})
+    dof = len(rows) - len(robots) - 1
+    if dof < 1:
+        return {"tested": False}
+    t = np.array([r[1] for r in rows])
+    X = np.column_stack([np.array([r[0] == i for r in rows], float) for i in robots] + [t])
+    out = {"tested": True, "segments": settings.drift_segments}
+    for j, comp in ((2, "v"), (3, "w")):
+        y = np.array([r[j] for r in rows])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        res = y - X @ coef
+        s2 = float(res @ res) / dof
+        cov = s2 * np.linalg.pinv(X.T @ X)
+        se = math.sqrt(max(cov[-1, -1], 0.0))
+        slope = float(coef[-1])
+        tstat = slope / se if se > 0 else (math.inf if slope else 0.0)
+        first = [r[j] for r in rows if r[1] == min(x[1] for x in rows if x[0] == r[0])]
+        last = [r[j] for r in rows if r[1] == max(x[1] for x in rows if x[0] == r[0])]
+        out[comp] = {"rate_per_s": slope, "p": float(min(1.0, 2 * 2 * stats.t.sf(abs(tstat), dof))),
+                     "early": float(np.mean(first)), "late": float(np.mean(last))}
+    return out
+
+
+def _partial_t(y, x, control):
+    """Robust t of the correlation of y and x after removing their linear dependence on ``control``."""
+    A = np.column_stack([np.ones_like(control), control])
+    ry = y - A @ np.linalg.lstsq(A, y, rcond=None)[0]
+    rx = x - A @ np.linalg.lstsq(A, x, rcond=None)[0]
+    r = 0.0 if np.std(rx) == 0 or np.std(ry) == 0 else float(np.corrcoef(rx, ry)[0, 1])
+    return r, robust_t(rx, ry) if r else 0.0
+
+
+def saturation(analysis):
+    """Does the residual grow faster than linearly with the commanded acceleration? The along-track (yaw)
+    residual against the sum of the signed squares of the v (w) command changes acting on the window,
+    with their linear sum removed (a timing error is linear in it), robust t, two-sided, Bonferroni
+    over v and w."""
+    out = {}
+    if not analysis.robots:
+        return out
+    for comp, cmd in (("along", "v_cmd"), ("yaw", "w_cmd")):
+        y = analysis.pooled(comp)
+        lin = np.concatenate([rr.reg["%s changes near window" % cmd] for rr in analysis.robots])
+        sq = np.concatenate([rr.reg["%s changes^2 near window" % cmd] for rr in analysis.robots])
+        r, t = _partial_t(y, sq, lin)
+        out[comp] = {"regressor": "%s changes^2 near window" % cmd, "r": r,
+                     "p": float(min(1.0, 2 * 2 * stats.norm.sf(abs(t))))}
+    return out
+
+
+def diagnose(analysis, fits, params, settings):
+    """Time dependence and saturation, named in the analysis' notes whatever they find."""
+    alpha = settings.residual_alpha
+    td = analysis.time_dependence = time_dependence(fits, params, settings)
+    sat = analysis.saturation = saturation(analysis)
+    parts = []
+    if td.get("tested"):
+        text = ", ".join("%s %+.1f %% per 100 s (%s early %.3f, late %.3f, p = %.2g)"
+                         % (c, 1e4 * td[c]["rate_per_s"], c, td[c]["early"], td[c]["late"], td[c]["p"])
+                         for c in ("v", "w"))
+        drift = [c for c in ("v", "w") if td[c]["p"] < alpha]
+        parts.append("time dependence: %s; gains fitted on %d parts of each record: %s" % (
+            ("the velocity gain changes over the record (%s): a drifting gain (gain_drift) or another slow change"
+             % " and ".join(drift)) if drift else "none", td["segments"], text))
+    else:
+        parts.append("time dependence: not tested (too few parts with motion)")
+    if sat:
+        text = ", ".join("%s residual vs %s (signed) r = %+.2f (p = %.2g)"
+                         % (c, d["regressor"], d["r"], d["p"]) for c, d in sat.items())
+        bad = [c for c, d in sat.items() if d["p"] < alpha]
+        parts.append("saturation: %s; %s" % (
+            ("the residual grows faster than linearly with the commanded acceleration (%s): the robot cannot "
+             "follow large command changes (accel_limit) or another saturation" % ", ".join(bad)) if bad else "none",
+            text))
+    analysis.notes += " Diagnosis: " + "; ".join(parts) + "."
