@@ -20,11 +20,19 @@ push       drives straight into the partner at ``push_speed``, holding
            that the contact turns would turn the pair together); "home"
            when the gap between the faces is below ``home_gap`` for
            ``home_steps`` steps
-pull       backs away at ``pull_speed`` for ``pull_time``: the gap must
-           grow by ``seat_pull_min`` .. ``seat_pull_max`` (the seated band)
+pull       backs away at ``pull_speed`` for at most ``pull_time``: the gap
+           must grow by ``seat_pull_min`` .. ``seat_pull_max`` (the seated
+           band) and stall there (the pull ends early once it has; it fails
+           early once the gap has grown past the band)
 repush     drives home again at ``repush_speed`` (the pull leaves the anchor
            part way out, its barbs behind the lips: a gentle push seats it,
-           a hard one can knock a barb out again)
+           a hard one can knock a barb out again). Seated only with C_a
+           within ``seat_lateral`` of the opening's axis: the holder keeps
+           the anchor's base on its robot's axis, so a pair pushed home that
+           far off the axis has its head as far off the mouth's centre, and
+           one barb tip in front of the mouth instead of behind a lip (the
+           tips spread 6.3 mm either side of the head, the mouth is 4.25 mm
+           either side of its centre: 2 mm of room)
 backoff    backs away at ``backoff_speed`` for ``backoff_time``, then
            approaches again: after a push that did not get home
            (``push_timeout``) or a pull outside the band. A push that jams
@@ -71,7 +79,7 @@ class DockingSettings:
     push_speed: float = 0.05          # m/s: straight push into the partner (faster folds the barbs surer: 40/40 vs 38/40)
     push_heading_gain: float = 2.0    # 1/s: w = gain x (partner heading - mover heading) while pushing/pulling
     push_start_gap: float = 0.016     # m: the push starts once the faces are this close ...
-    push_lateral: float = 0.0025      # m: ... with C_a this close to the opening's axis ...
+    push_lateral: float = 0.0015      # m: ... with C_a this close to the opening's axis (or the aim) ...
     push_yaw: float = 0.12            # rad: ... and the headings this close
     push_timeout: float = 2.5         # s: not home after this long: back off
     home_gap: float = 0.003           # m: faces closer than this: pushed home
@@ -80,13 +88,15 @@ class DockingSettings:
     pull_time: float = 1.0            # s
     seat_pull_min: float = 0.0085     # m: a seated pair stretches at least this much under the pull ...
     seat_pull_max: float = 0.0135     # m: ... and at most this much
+    pull_stall: float = 0.0005        # m: the pull has stalled when the gap grew less than this in a step
+    seat_lateral: float = 0.0015      # m: seated only with C_a this close to the opening's axis
     repush_speed: float = 0.02        # m/s: the push home after the pull
     repush_timeout: float = 1.5       # s: back home after the pull within this
     backoff_speed: float = 0.03       # m/s
     backoff_time: float = 0.8         # s
     aim_step: float = 0.002           # m: after a jammed push, aim the mouth this much further to the side
     aim_max: float = 0.004            # m: ... up to this far off the partner's axis
-    repair_lateral: float = 0.0035    # m: a coupled pair with C_a this far off the opening's axis ...
+    repair_lateral: float = 0.002     # m: a coupled pair with C_a this far off the opening's axis ...
     repair_gap: float = 0.003         # m: ... or its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
@@ -143,6 +153,7 @@ class Docking:
         self.note = ""                # why the last phase change happened
         self.aim = 0.0                # m: where the approach puts C_a across the opening's axis (j's frame, +y)
         self.heading_ref = None       # rad: the heading a driven phase holds (the partner's at its start)
+        self.last_gap = None          # m: the gap at the previous update
 
     # ------------------------------------------------------------ helpers
     def _to(self, phase, now, note=""):
@@ -170,6 +181,12 @@ class Docking:
         just been proven seated."""
         if self.since is None:           # the first update of this phase (the pair was waiting its turn)
             self.since = now
+        try:
+            return self._update(gap, lateral, dtheta, now)
+        finally:
+            self.last_gap = gap
+
+    def _update(self, gap, lateral, dtheta, now):
         s, phase, t = self.s, self.phase, self._elapsed(now)
         home = gap <= s.home_gap
         self.home_count = self.home_count + 1 if home else 0
@@ -185,8 +202,9 @@ class Docking:
                 self._to(BACKOFF, now, "push %d did not get home (%.1f mm out, pushed %.1f mm aside after %.1f s); "
                          "aiming %.1f mm across" % (self.attempts, 1e3 * gap, 1e3 * lateral, t, 1e3 * self.aim))
         elif phase == PULL:
-            if t >= s.pull_time - 1e-9:
-                growth = gap - self.pull_from
+            growth = gap - self.pull_from
+            stalled = self.last_gap is not None and gap - self.last_gap < s.pull_stall
+            if growth > s.seat_pull_max or t >= s.pull_time - 1e-9 or (stalled and growth >= s.seat_pull_min):
                 self.last_growth = growth
                 if s.seat_pull_min <= growth <= s.seat_pull_max:
                     self._to(REPUSH, now, "pull held at %.1f mm: seated" % (1e3 * growth))
@@ -195,8 +213,11 @@ class Docking:
                     self._to(BACKOFF, now, "pull stretched the pair %.1f mm (seated: %.1f-%.1f mm): %s"
                              % (1e3 * growth, 1e3 * s.seat_pull_min, 1e3 * s.seat_pull_max, why))
         elif phase == REPUSH:
-            if self.home_count >= s.home_steps:
+            if self.home_count >= s.home_steps and abs(lateral) > s.seat_lateral:
+                self._to(BACKOFF, now, "home %.1f mm off the axis: a barb in front of the mouth" % (1e3 * lateral))
+            elif self.home_count >= s.home_steps:
                 self._to(SEATED, now, "seated (pull held at %.1f mm)" % (1e3 * self.last_growth))
+                self.last_gap = gap
                 return True
             if t >= s.repush_timeout:
                 self._to(BACKOFF, now, "not home again after the pull (%.1f mm out)" % (1e3 * gap))

@@ -109,6 +109,8 @@ class MPCSettings:
     dock_pull_time: float = _DOCK.pull_time       # s: ... for this long
     dock_seat_pull_min: float = _DOCK.seat_pull_min # m: a seated pair stretches at least this much under the pull ...
     dock_seat_pull_max: float = _DOCK.seat_pull_max # m: ... and at most this much (anchor_trials seatpull measures it)
+    dock_pull_stall: float = _DOCK.pull_stall     # m: the pull has stalled when the gap grew less in a step
+    dock_seat_lateral: float = _DOCK.seat_lateral # m: seated only with C_a this close to the opening's axis
     dock_repush_speed: float = _DOCK.repush_speed # m/s: the push home after the pull
     dock_repush_timeout: float = _DOCK.repush_timeout # s: home again after the pull within this, or back off
     dock_backoff_speed: float = _DOCK.backoff_speed # m/s
