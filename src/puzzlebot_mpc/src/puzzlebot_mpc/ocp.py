@@ -1,7 +1,9 @@
 """The MPC's optimal control problem, written once in CasADi.
 
-One formulation serves two solvers: the real-time iteration (a Gauss-Newton
-QP per step, solved by Clarabel) and the full NLP (IPOPT). Everything that
+One formulation, two forms: this symbolic one (CasADi) is the full NLP that
+IPOPT solves and the reference of puzzlebot_mpc/qp.py, which assembles the
+real-time iteration's Gauss-Newton QP of the same problem in numpy (the
+tests compare the two). Everything that
 changes per step is a parameter; the structure depends only on the number of
 robots ``n``, the horizons and the *pair slots* (which robot pairs may carry
 alignment costs or coupling constraints).
@@ -160,6 +162,24 @@ def params_layout(st: Structure):
         lay.add("yaw_lim", (P,))        # |relative heading| limit of a coupled pair [rad]
         lay.add("yaw_off", (P,))        # multiple of 2 pi removed from the pair's raw heading difference
     return lay
+
+
+def param_vector(par, d):
+    """The flat parameter vector of layout ``par`` from a qp.StepData (the symbolic problem's numbers)."""
+    p = np.zeros(par.size)
+    n, h = d.x0.shape[0], d.vref.shape[1]
+    par.put(p, "x0", d.x0)
+    par.put(p, "goal", d.goal)
+    par.put(p, "goal_on", d.goal_on)
+    par.put(p, "vref", d.vref.reshape(n * h, 2))
+    par.put(p, "vel_on", d.vel_on)
+    par.put(p, "bsign", d.bsign.reshape(-1))
+    if len(d.act):
+        for name in ("pt_i", "pt_j", "act", "conn", "head", "yaw_lim", "yaw_off"):
+            par.put(p, name, getattr(d, name))
+        par.put(p, "poly_g", d.poly_g.reshape(-1, 2))
+        par.put(p, "poly_h", d.poly_h.reshape(-1))
+    return p
 
 
 def _rot(th, v):
