@@ -174,6 +174,7 @@ class _ClarabelQP:
         self.qs = qpm.QPStructure(settings, st)
         self.lay = self.qs.lay
         self.solver = None
+        self.solver_s = 0.0          # time spent in Clarabel (set-up, update, solve) [s], summed
 
     def solve(self, settings, zbar, d):
         import clarabel
@@ -182,6 +183,7 @@ class _ClarabelQP:
         if not (np.all(np.isfinite(Px)) and np.all(np.isfinite(q)) and np.all(np.isfinite(Ax))
                 and np.all(np.isfinite(b))):
             return None, "non-finite QP data", 0, math.inf
+        t0 = time.perf_counter()
         if self.solver is None:
             P, A = self.qs.matrices(Px, Ax)
             cones = [clarabel.ZeroConeT(self.qs.n_eq), clarabel.NonnegativeConeT(self.qs.n_in)]
@@ -189,6 +191,7 @@ class _ClarabelQP:
         else:
             self.solver.update(P=Px, q=q, A=Ax, b=b)
         sol = self.solver.solve()
+        self.solver_s += time.perf_counter() - t0
         status = str(sol.status)
         ok = status in ("Solved", "AlmostSolved")
         z = np.asarray(sol.x, dtype=float)
@@ -215,10 +218,13 @@ class _IpoptNLP:
         ne, ni = self.prob.eq.numel(), self.prob.ineq.numel()
         self.lbg = np.concatenate([np.zeros(ne), np.full(ni, -np.inf)])
         self.ubg = np.zeros(ne + ni)
+        self.solver_s = 0.0
 
     def solve(self, settings, zbar, d):
         p = param_vector(self.prob.par, d)
+        t0 = time.perf_counter()
         sol = self.nlp(x0=zbar, p=p, lbx=self.prob.lb, ubx=self.prob.ub, lbg=self.lbg, ubg=self.ubg)
+        self.solver_s += time.perf_counter() - t0
         stats = self.nlp.stats()
         ok = bool(stats.get("success", False))
         status = str(stats.get("return_status", "unknown"))
@@ -341,6 +347,7 @@ class MultiRobotMPC:
         if bad:
             raise ValueError("pair slots must join two different robots of 0..%d, got %s" % (n - 1, bad))
         parts = [(part, self._qp(part)) for part in self._plan(key)]
+        solver_s = sum(qp.solver_s for _, qp in parts)
         Xbar, Ubar, cold = self._initial_guess(x0)
         data = qpm.pack(s, x0, objectives, pairs)
         iters = s.sqp_iterations_cold if cold else s.sqp_iterations
@@ -357,13 +364,15 @@ class MultiRobotMPC:
         except (RuntimeError, ValueError) as e:       # solver plugin errors: never crash the loop
             outs = [(None, "solver error: %s" % str(e).splitlines()[-1][:200], 0, None)]
         qp_iters = sum(o[2] for o in outs)
+        solver_ms = 1e3 * (sum(qp.solver_s for _, qp in parts) - solver_s)
         failed = [o for o in outs if o[0] is None]
         solve_ms = 1e3 * (time.perf_counter() - t0)
         if failed:
             self._warm = None
             return MPCResult(np.zeros((n, 2)), np.zeros((n, h + 1, NX)), False, failed[0][1], solve_ms, qp_iters,
                              float("nan"), fallback="stop", extra={"structure_pairs": len(key),
-                                                                   "subproblems": len(parts)})
+                                                                   "subproblems": len(parts),
+                                                                   "solver_ms": solver_ms})
         Xs, Us = np.zeros((n, h + 1, NX)), np.zeros((n, h, NU))
         cost, max_pip, max_bf = 0.0, 0.0, 0.0
         for (part, qp), (z, _, _, dpart) in zip(parts, outs):
@@ -382,7 +391,7 @@ class MultiRobotMPC:
         commands[np.abs(commands) < s.command_zero] = 0.0      # interior-point noise: at rest means exactly 0
         extra = {"structure_pairs": len(key), "butterfly_lobes_tried": 2 ** len(ambiguous),
                  "max_pip_slack": max_pip, "max_butterfly_slack": max_bf, "sqp_iterations": iters,
-                 "subproblems": len(parts)}
+                 "subproblems": len(parts), "solver_ms": solver_ms}
         return MPCResult(commands, X, True, outs[0][1], solve_ms, qp_iters, cost, extra=extra)
 
     def _solve_part(self, part, qp, Xbar, Ubar, data, pref, ambiguous, iters):
