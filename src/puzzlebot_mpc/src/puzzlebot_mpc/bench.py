@@ -54,27 +54,39 @@ DRIVE_W = 0.15        # rad/s, turn rate (sign switches halfway: an S-curve)
 PLANT_SUBSTEPS = 10   # plant integration steps per control period
 
 
-def chain(n, geometry):
-    """Names and poses of a straight coupled chain along +x (first robot in front)."""
+ASSEMBLY_SPACING = 0.3   # m: side by side distance of the chains with --assemblies
+
+
+def chain(n, geometry, assemblies=1):
+    """Names and poses of ``assemblies`` straight chains along +x (first robot in front), side by side;
+    returns (names, poses, chains as name lists). The first chain is the one that drives."""
     names = ["b%d" % (k + 1) for k in range(n)]
-    poses = {name: (-k * geometry.body_side, 0.0, 0.0) for k, name in enumerate(names)}
-    return names, poses
+    chains = [list(c) for c in np.array_split(names, assemblies)]
+    poses = {}
+    for a, c in enumerate(chains):
+        for k, name in enumerate(c):
+            poses[name] = (-k * geometry.body_side, a * ASSEMBLY_SPACING, 0.0)
+    return names, poses, chains
 
 
-def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=None):
-    """Benchmark one configuration; returns the result dict (JSON line fields and extras)."""
+def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=None, assemblies=1):
+    """Benchmark one configuration; returns the result dict (JSON line fields and extras).
+
+    ``assemblies`` > 1: the robots form that many chains side by side (independent subproblems); the
+    first drives, the others hold still (every one is solved every step)."""
     base = settings or load_settings()
     s = replace(base, horizon=horizon, constraint_horizon=min(constraint_horizon, horizon))
     if solver:
         s = replace(s, solver=solver)
     s.check()
     geometry = RobotGeometry()
-    names, poses = chain(robots, geometry)
+    names, poses, chains = chain(robots, geometry, assemblies)
     t_build = time.perf_counter()
     loop = ControlLoop(names, s, geometry)
     setup_s = time.perf_counter() - t_build
-    for a, o in zip(names[:-1], names[1:]):
-        loop.pairs.add_coupled(make_pair(a, o, ANCHOR, geometry))
+    for c in chains:
+        for a, o in zip(c[:-1], c[1:]):
+            loop.pairs.add_coupled(make_pair(a, o, ANCHOR, geometry))
     t = 0.0
     for name, p in poses.items():
         loop.on_pose(name, t, *p)
@@ -113,7 +125,8 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
                                                      coupling_polygon(pair, geometry)))
     arr = np.array(times)
     lead_moved = math.hypot(poses[names[0]][0], poses[names[0]][1])
-    return {"robots": robots, "horizon": horizon, "constraint_horizon": s.constraint_horizon,
+    return {"robots": robots, "assemblies": assemblies, "solver_threads": s.solver_threads,
+            "horizon": horizon, "constraint_horizon": s.constraint_horizon,
             "steps": steps, "median_ms": round(float(np.median(arr)), 3),
             "p95_ms": round(float(np.percentile(arr, 95)), 3), "max_ms": round(float(arr.max()), 3),
             "failures": failures, "solver": s.solver, "first_step_ms": round(first_ms, 1),
@@ -272,6 +285,9 @@ def main(argv=None):
     ap.add_argument("--constraint-horizon", type=int, default=3, help="constraint horizon Hc <= Hm")
     ap.add_argument("--steps", type=int, default=50, help="control steps measured (>= 50 for the table)")
     ap.add_argument("--solver", choices=("clarabel", "ipopt"), default=None, help="override mpc.yaml's solver")
+    ap.add_argument("--assemblies", type=int, default=1,
+                    help="one configuration: the robots form this many chains side by side; the first drives")
+    ap.add_argument("--solver-threads", type=int, default=None, help="override mpc.yaml's solver_threads")
     ap.add_argument("--json", action="store_true", help="print one JSON line")
     ap.add_argument("--grid", action="store_true",
                     help="run N in %s at Hm = 10 (and 3, 5 up to %d robots), then the IPOPT reference, and print "
@@ -290,8 +306,14 @@ def main(argv=None):
         return 0
     if args.robots < 2 or args.horizon < 1 or args.steps < 1 or args.constraint_horizon < 1:
         ap.error("need --robots >= 2, --horizon >= 1, --constraint-horizon >= 1, --steps >= 1")
+    if not 1 <= args.assemblies <= args.robots // 2 or (args.solver_threads is not None and args.solver_threads < 1):
+        ap.error("need 1 <= --assemblies <= robots / 2 and --solver-threads >= 1")
+    settings = load_settings()
+    if args.solver_threads:
+        settings = replace(settings, solver_threads=args.solver_threads)
     if not args.grid:
-        r = run(args.robots, args.horizon, args.constraint_horizon, args.steps, solver=args.solver)
+        r = run(args.robots, args.horizon, args.constraint_horizon, args.steps, settings=settings,
+                solver=args.solver, assemblies=args.assemblies)
         if args.json:
             print(json.dumps(r))
         else:
@@ -309,11 +331,11 @@ def main(argv=None):
             ap.error("--grid-robots: every N must be >= 2")
     results, reference = [], []
     for n, h in grid(robots):
-        r = run(n, h, args.constraint_horizon, args.steps, solver=args.solver)
+        r = run(n, h, args.constraint_horizon, args.steps, settings=settings, solver=args.solver)
         print(json.dumps(r), flush=True)
         results.append(r)
     if REFERENCE[0] in robots and args.solver != "ipopt":
-        r = run(REFERENCE[0], REFERENCE[1], args.constraint_horizon, args.steps, solver="ipopt")
+        r = run(REFERENCE[0], REFERENCE[1], args.constraint_horizon, args.steps, settings=settings, solver="ipopt")
         print(json.dumps(r), flush=True)
         reference.append(r)
     doc = {"benchmark": "puzzlebot_mpc.bench", "machine": machine(), "steps": args.steps,

@@ -188,8 +188,8 @@ class _ClarabelQP:
             P, A = self.qs.matrices(Px, Ax)
             cones = [clarabel.ZeroConeT(self.qs.n_eq), clarabel.NonnegativeConeT(self.qs.n_in)]
             self.solver = clarabel.DefaultSolver(P, q, A, b, cones, _clarabel_settings(settings))
-        else:
-            self.solver.update(P=Px, q=q, A=Ax, b=b)
+        else:       # lists: the binding converts them ~4x faster than numpy arrays (5 ms at 128 robots)
+            self.solver.update(P=Px.tolist(), q=q.tolist(), A=Ax.tolist(), b=b.tolist())
         sol = self.solver.solve()
         self.solver_s += time.perf_counter() - t0
         status = str(sol.status)
