@@ -194,7 +194,7 @@ class _ClarabelQP:
         self.solver_s += time.perf_counter() - t0
         status = str(sol.status)
         ok = status in ("Solved", "AlmostSolved")
-        z = np.asarray(sol.x, dtype=float)
+        z = self.qs.from_solver(sol.x)
         if ok and not np.all(np.isfinite(z)):
             ok, status = False, status + " (non-finite solution)"
         return (z if ok else None), status, int(sol.iterations), float(sol.obj_val)

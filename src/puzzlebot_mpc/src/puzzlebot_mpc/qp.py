@@ -172,6 +172,8 @@ class QPStructure:
         self.pairs = np.array(st.pairs, dtype=int).reshape(-1, 2)
         P = len(self.pairs)
         nz = L.nz
+        self._solver_order()
+        vpos = self.vpos
         # ---------------------------------------------------------- residual blocks
         self.v0_idx = L.x_idx[0, :, 3:5]                                         # (n, 2)
         rs = np.concatenate([L.u_idx, L.x_idx[1:]], axis=2)                       # (H, n, 7)
@@ -208,11 +210,11 @@ class QPStructure:
         for V, pat in res_blocks:
             jtj = (pat.T.astype(int) @ pat.astype(int)) > 0
             a, b = np.nonzero(np.triu(jtj))
-            ga, gb = V[:, a], V[:, b]
+            ga, gb = vpos[V[:, a]], vpos[V[:, b]]
             keys.append((np.minimum(ga, gb) + nz * np.maximum(ga, gb)).ravel())     # row + nz * col
             self._p_maps.append((a, b))
         slack = np.flatnonzero(L.slack)
-        keys.append(slack + nz * slack)
+        keys.append(vpos[slack] + nz * vpos[slack])
         allkeys = np.concatenate(keys)
         ukeys, inv = np.unique(allkeys, return_inverse=True)        # sorted by (col, row): CSC order
         self.p_inv = inv
@@ -271,6 +273,17 @@ class QPStructure:
         self._row_blocks = eq.blocks + ineq.blocks
         rr = np.concatenate([eq.coo()[0], ineq.coo()[0]])
         cc = np.concatenate([eq.coo()[1], ineq.coo()[1]])
+        # rows in solver order: within each cone by the robot, then the stage, of the row's first variable
+        first = np.full(self.m, nz)
+        np.minimum.at(first, rr, cc)
+        rkey = self.var_robot[first], self.var_stage[first]
+        rows = np.arange(self.m)
+        zero = rows < self.n_eq
+        self.rorder = np.concatenate([rows[zero][np.lexsort((rows[zero], rkey[1][zero], rkey[0][zero]))],
+                                      rows[~zero][np.lexsort((rows[~zero], rkey[1][~zero], rkey[0][~zero]))]])
+        rpos = np.empty(self.m, dtype=int)
+        rpos[self.rorder] = rows
+        rr, cc = rpos[rr], vpos[cc]
         order = np.lexsort((rr, cc))
         self.a_perm = order
         self.A_indices = rr[order].astype(np.int64)
@@ -278,6 +291,30 @@ class QPStructure:
         self.nA = len(rr)
         self._ub_vals = np.ones(len(self.ub_vars))
         self._lb_vals = -np.ones(len(self.lb_vars))
+
+    def _solver_order(self):
+        """The solver's variable order (``vorder``: original indices; ``vpos``: the inverse): robot by
+        robot, each robot's stages in turn (a pair's slacks with its point robot). The sparse LDL's
+        ordering (AMD) starts from it; robot-major measured 7-12 % faster than the layout's stage-major
+        order for a chain of 64 and 128 robots at Hm = 10 (same solution)."""
+        L, st = self.lay, self.st
+        nz = L.nz
+        robot, stage = np.zeros(nz), np.zeros(nz)
+        n = st.n
+        for k in range(st.horizon + 1):
+            ok = L.x_idx[k, 0] >= 0
+            for c in np.flatnonzero(ok):
+                robot[L.x_idx[k, :, c]], stage[L.x_idx[k, :, c]] = np.arange(n), k
+            if k < st.horizon:
+                robot[L.u_idx[k]], stage[L.u_idx[k]] = np.arange(n)[:, None], k + 0.5
+            robot[L.sb_idx[k]], stage[L.sb_idx[k]] = np.arange(n), k
+            if len(st.pairs) and L.sp_idx[k, 0] >= 0:
+                robot[L.sp_idx[k]], stage[L.sp_idx[k]] = self.pairs[:, 0] + 0.5, k
+        self.var_robot = np.append(robot, np.inf)          # [nz]: rows without a variable
+        self.var_stage = np.append(stage, np.inf)
+        self.vorder = np.lexsort((np.arange(nz), stage, robot))
+        self.vpos = np.empty(nz, dtype=int)
+        self.vpos[self.vorder] = np.arange(nz)
 
     def _bounds(self):
         s, L = self.settings, self.lay
@@ -397,7 +434,8 @@ class QPStructure:
         return float(sum(np.sum(r * r) for r, _ in self.residuals(z, d, jacobians=False)) + self.lin @ z)
 
     def assemble(self, zbar, d):
-        """(P data, q, A data, b) of the QP linearised at zbar, in this structure's CSC orders."""
+        """(P data, q, A data, b) of the QP linearised at zbar, in the solver's order (``vorder``, ``rorder``;
+        CSC data of P's upper triangle and of A): the solution is ``from_solver(z)``."""
         nz = self.lay.nz
         pvals, q = [], np.zeros(nz)
         for (r, J), V, (a, b) in zip(self.residuals(zbar, d), self._block_vars(), self._p_maps):
@@ -411,7 +449,11 @@ class QPStructure:
         Px = np.bincount(self.p_inv, np.concatenate(pvals), self.nP)
         q += self.lin
         avals, bvals = self._rows(zbar, d)
-        return Px, q, avals[self.a_perm], bvals
+        return Px, q[self.vorder], avals[self.a_perm], bvals[self.rorder]
+
+    def from_solver(self, zs):
+        """Variables in the layout's order from the solver's."""
+        return np.asarray(zs, float)[self.vpos]
 
     def _rows(self, zbar, d):
         """A entries (in row-block COO order) and b of the linearised rows."""
@@ -519,8 +561,17 @@ class QPStructure:
         return A[:, self._pat("pip")], b
 
     def matrices(self, Px, Ax):
-        """scipy CSC matrices (P upper, A) of the data arrays (for the solver's set-up and tests)."""
+        """scipy CSC matrices (P upper, A) of the data arrays, in the solver's order."""
         nz = self.lay.nz
         P = sp.csc_matrix((Px, self.P_indices, self.P_indptr), shape=(nz, nz))
         A = sp.csc_matrix((Ax, self.A_indices, self.A_indptr), shape=(self.m, nz))
         return P, A
+
+    def original(self, Px, q, Ax, b):
+        """Dense P (symmetric), q, A, b in the layout's variable order and the row blocks' row order."""
+        P, A = self.matrices(Px, Ax)
+        P = P.toarray()
+        P = P + np.triu(P, 1).T
+        bo = np.empty_like(b)
+        bo[self.rorder] = b
+        return P[self.vpos][:, self.vpos], q[self.vpos], A.toarray()[np.argsort(self.rorder)][:, self.vpos], bo
