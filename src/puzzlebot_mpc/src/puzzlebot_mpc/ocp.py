@@ -3,10 +3,10 @@
 One formulation, two forms: this symbolic one (CasADi) is the full NLP that
 IPOPT solves and the reference of puzzlebot_mpc/qp.py, which assembles the
 real-time iteration's Gauss-Newton QP of the same problem in numpy (the
-tests compare the two). Everything that
-changes per step is a parameter; the structure depends only on the number of
-robots ``n``, the horizons and the *pair slots* (which robot pairs may carry
-alignment costs or coupling constraints).
+tests compare the two). Everything that changes per step is a parameter;
+the structure depends only on the number of robots ``n``, the horizons and
+the *pair slots* (which robot pairs may carry alignment costs or coupling
+constraints).
 
 State x = [px, py, theta, v, w], input u = [dv, dw], explicit Euler
 (model.euler_step). The initial pose is measured (a parameter). The initial
@@ -323,7 +323,8 @@ class Problem:
 
     # --------------------------------------------------------------- QP data
     def qp_function(self):
-        """CasADi Function (zbar, p) -> [P (upper, nonzeros), q, A (nonzeros), b] and the sparsities.
+        """CasADi Function (zbar, p) -> [P (upper, nonzeros), q, A (nonzeros), b] and the sparsities:
+        the Gauss-Newton QP of the symbolic form (the reference that qp.QPStructure is tested against).
 
         Clarabel form: min 1/2 z'Pz + q'z s.t. A z + s = b, s in {0}^n_eq x R+^n_in.
         Rows of A: linearised dynamics (zero cone), linearised inequalities
