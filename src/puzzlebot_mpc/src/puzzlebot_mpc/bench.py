@@ -46,6 +46,10 @@ GRID_ROBOTS = (2, 4, 6, 8, 16, 32, 64, 128, 256)
 GRID_HORIZONS = (3, 5, 10)
 GRID_SHORT_MAX = 32   # Hm = 3 and 5 up to this many robots; Hm = 10 for every N
 REFERENCE = (8, 10)   # (robots, Hm) of the IPOPT comparison
+#: decomposition runs: (robots, chains side by side) at Hm = 10, each as one joint QP, as separate QPs, two threads
+DECOMPOSITION = ((32, 8), (128, 4))
+DECOMPOSITION_MODES = (("one joint QP", dict(decompose=False)), ("separate QPs", dict(decompose=True)),
+                       ("separate QPs, 2 threads", dict(decompose=True, solver_threads=2)))
 #: measured targets (issue 28): (robots, Hm, statistic, limit [ms])
 TARGETS = ((8, 10, "median_ms", 3.0), (128, 10, "p95_ms", 30.0), (256, 10, "p95_ms", 100.0))
 PAGE_BEGIN, PAGE_END = "<!-- BEGIN bench_table -->", "<!-- END bench_table -->"
@@ -234,6 +238,18 @@ def reference_table(results, reference):
     return "\n".join(rows)
 
 
+def decomposition_table(rows):
+    """Several chains side by side solved jointly, as separate QPs, and on two threads."""
+    out = ["| robots, chains | solved as | step median / p95 [ms] | in the solver, summed over threads [ms] "
+           "| QP iterations | failures |",
+           "|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append("| %d, %d | %s | %.1f / %.1f | %.1f | %g | %d |" % (
+            r["robots"], r["assemblies"], r["mode"], r["median_ms"], r["p95_ms"], r["solver_median_ms"],
+            r["qp_iterations_median"], r["failures"]))
+    return "\n".join(out)
+
+
 def targets_table(results):
     """The measured targets (TARGETS), no failed solve and no lost pair: met or not."""
     rows = ["| target | measured | met |", "|---|---|---|"]
@@ -259,6 +275,8 @@ def page_block(doc):
                                                           m["cpu_count"], m["load_avg_1_5_15"]),
         table(res), "At Hm = 10, where the time goes:", solver_table(res),
         "Against IPOPT on the full NLP (same run):", reference_table(res, doc.get("reference", [])),
+        "Independent assemblies (chains side by side, the first drives):",
+        decomposition_table(doc.get("decomposition", [])),
         "Targets:", targets_table(res)])
 
 
@@ -338,9 +356,19 @@ def main(argv=None):
         r = run(REFERENCE[0], REFERENCE[1], args.constraint_horizon, args.steps, settings=settings, solver="ipopt")
         print(json.dumps(r), flush=True)
         reference.append(r)
+    decomposition = []
+    for n, k in DECOMPOSITION:
+        if n not in robots:
+            continue
+        for label, over in DECOMPOSITION_MODES:
+            r = run(n, 10, args.constraint_horizon, args.steps, settings=replace(settings, **over), solver=args.solver,
+                    assemblies=k)
+            r["mode"] = label
+            print(json.dumps(r), flush=True)
+            decomposition.append(r)
     doc = {"benchmark": "puzzlebot_mpc.bench", "machine": machine(), "steps": args.steps,
            "constraint_horizon": args.constraint_horizon, "time": time.strftime("%Y-%m-%d %H:%M:%S"),
-           "results": results, "reference": reference}
+           "results": results, "reference": reference, "decomposition": decomposition}
     for path in args.out:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         with open(path, "w") as f:

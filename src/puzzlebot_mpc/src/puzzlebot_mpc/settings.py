@@ -111,7 +111,8 @@ class MPCSettings:
         """Range and cross-field checks; raise ConfigError."""
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
-                                "sqp_iterations_cold", "solver_threads", "pair_epsilon", "pair_lost_margin", "wiggle_period",
+                                "sqp_iterations_cold", "solver_threads", "pair_epsilon", "pair_lost_margin",
+                                "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
                                 "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout",
