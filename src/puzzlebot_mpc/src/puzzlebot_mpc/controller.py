@@ -120,8 +120,9 @@ class MPCResult:
 
 
 GROUP_ROBOTS = 16    # subproblems with fewer robots are solved together in one QP (saves per-solve overhead;
-                     # the solution is the same: they are independent). 128 robots in 32 chains of 4: 8 -> 184 ms,
-                     # 16 -> 154 ms, 32 -> 152 ms, all in one QP -> 172 ms per step (one run, load 3-4)
+                     # the solution is the same: they are independent). 128 robots in 32 chains of 4, one run at
+                     # load 3-4: 8 -> 184 ms, 16 -> 154 ms, 32 -> 152 ms, all in one QP -> 172 ms per step (runs
+                     # differ by about as much)
 CACHE_SIZE = 64      # built QPs kept (least recently used dropped)
 
 
