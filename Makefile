@@ -28,9 +28,10 @@ test-unit: build
 test-ros: build
 	@scripts/run_tests.sh ros
 
-## make bench: MPC step time for N in 2..32 x Hm in 3, 5, 10 (Hc = 3); table on screen, JSON in build/bench and docs
+## make bench: MPC step time for N = 2..256 at Hm = 10 (and Hm = 3, 5 up to 32 robots; Hc = 3), IPOPT at N = 8;
+## tables on screen and in docs/mpc.md, JSON in build/bench and docs
 bench: build
-	@$(ENV) rosrun puzzlebot_mpc bench --grid --out build/bench/mpc_bench.json --out docs/mpc_bench.json
+	@$(ENV) rosrun puzzlebot_mpc bench --grid --out build/bench/mpc_bench.json --out docs/mpc_bench.json --page docs/mpc.md
 
 ## make experiments [ARGS="--trials 20"]: the paper's experiments (coupling vs offset, decoupling, MPC time,
 ## force profile, chain down the step); resumable; rewrites the figures and tables of docs/results.md

@@ -9,7 +9,8 @@ import pytest
 from puzzlebot_common.geometry import RobotGeometry, transform_point, inverse_transform_point
 from puzzlebot_mpc.controller import MultiRobotMPC, Objectives, PairObjective
 from puzzlebot_common.model import NX, euler_step, unicycle_arc
-from puzzlebot_mpc.ocp import pair_residual_terms
+from puzzlebot_mpc.ocp import Problem, Structure, pair_residual_terms, param_vector
+from puzzlebot_mpc.qp import pack
 from puzzlebot_mpc.settings import MPCSettings
 
 GEO = RobotGeometry()
@@ -36,10 +37,9 @@ def test_pip_rows_of_the_problem_agree_with_ray_casting_on_random_poses():
     """The OCP's coupling rows (k = 1, slack 0, no margin) say 'inside' exactly when the anchor
     head lies in the opening robot's front triangle by an independent test."""
     s = MPCSettings(horizon=2, constraint_horizon=1, pip_margin=0.0, butterfly=False)
-    mpc = MultiRobotMPC(s, 2).setup()
-    built = mpc._get(((0, 1),))
-    g_fn = built.prob.residual_function()
-    lay = built.lay
+    prob = Problem(s, Structure(2, 2, 1, ((0, 1),)))
+    g_fn = prob.residual_function()
+    lay = prob.lay
     rng = np.random.default_rng(3)
     tri = GEO.front_triangle()
     agree = inside_count = 0
@@ -51,7 +51,7 @@ def test_pip_rows_of_the_problem_agree_with_ray_casting_on_random_poses():
         x0 = np.array([[*pose_i, 0, 0], [*pose_j, 0, 0]])
         obj = Objectives.stop_all(2)
         obj.pairs = [coupled_pair_objective()]
-        p = mpc._params(built, x0, obj, obj.pairs)
+        p = param_vector(prob.par, pack(s, x0, obj, obj.pairs))
         z = np.zeros(lay.nz)
         z[lay.x_idx[1]] = x0                       # stage 1 = the poses under test
         _, ineq = g_fn(z, p)

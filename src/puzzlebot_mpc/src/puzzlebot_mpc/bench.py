@@ -8,10 +8,19 @@ control step goes through ControlLoop.step: pair bookkeeping, behaviour
 objectives, the MPC solve. The step time is the wall time of that call;
 the first step (it builds the problem for the pair structure and starts
 cold) is reported separately as ``first_step_ms`` and not in the
-statistics.
+statistics. ``solver_median_ms`` is the part of the step spent inside the QP
+solver (Clarabel: set-up, data update, interior-point iterations); the rest
+is Python (pair bookkeeping, objectives, QP assembly, rollout).
+
+The grid (``make bench``) runs N in GRID_ROBOTS at Hm = 10 and, up to 32
+robots, at Hm = 3 and 5; then the same N = 8, Hm = 10 run with IPOPT on the
+full NLP (the lab's kind of solver, built once here) for comparison; it
+prints the tables and the issue's targets (TARGETS) met or not, writes the
+JSON and, with ``--page``, rewrites the generated block of docs/mpc.md.
 
     python -m puzzlebot_mpc.bench --robots 8 --horizon 10 --json
-    python -m puzzlebot_mpc.bench --grid --out build/bench/mpc_bench.json
+    python -m puzzlebot_mpc.bench --grid --out build/bench/mpc_bench.json --page docs/mpc.md
+    python -m puzzlebot_mpc.bench --grid --grid-robots 64,128     # part of the grid (no files written)
     python -m puzzlebot_mpc.bench --robots 4 --couple-trials 24   # coupling success rate
 """
 
@@ -33,34 +42,55 @@ from puzzlebot_mpc.control_loop import ControlLoop
 from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.pairs import ANCHOR, coupling_polygon, head_margin, make_pair
 
-GRID_ROBOTS = (2, 4, 6, 8, 16, 32)
+GRID_ROBOTS = (2, 4, 6, 8, 16, 32, 64, 128, 256)
 GRID_HORIZONS = (3, 5, 10)
+GRID_SHORT_MAX = 32   # Hm = 3 and 5 up to this many robots; Hm = 10 for every N
+REFERENCE = (8, 10)   # (robots, Hm) of the IPOPT comparison
+#: decomposition runs: (robots, chains side by side) at Hm = 10, each as one joint QP, as separate QPs, two threads
+DECOMPOSITION = ((32, 8), (128, 4))
+DECOMPOSITION_MODES = (("one joint QP", dict(decompose=False)), ("separate QPs", dict(decompose=True)),
+                       ("separate QPs, 2 threads", dict(decompose=True, solver_threads=2)))
+#: measured targets (issue 28): (robots, Hm, statistic, limit [ms])
+TARGETS = ((8, 10, "median_ms", 3.0), (128, 10, "p95_ms", 30.0), (256, 10, "p95_ms", 100.0))
+PAGE_BEGIN, PAGE_END = "<!-- BEGIN bench_table -->", "<!-- END bench_table -->"
 DRIVE_V = 0.03        # m/s, assembly speed
 DRIVE_W = 0.15        # rad/s, turn rate (sign switches halfway: an S-curve)
 PLANT_SUBSTEPS = 10   # plant integration steps per control period
 
 
-def chain(n, geometry):
-    """Names and poses of a straight coupled chain along +x (first robot in front)."""
+ASSEMBLY_SPACING = 0.3   # m: side by side distance of the chains with --assemblies
+
+
+def chain(n, geometry, assemblies=1):
+    """Names and poses of ``assemblies`` straight chains along +x (first robot in front), side by side;
+    returns (names, poses, chains as name lists). The first chain is the one that drives."""
     names = ["b%d" % (k + 1) for k in range(n)]
-    poses = {name: (-k * geometry.body_side, 0.0, 0.0) for k, name in enumerate(names)}
-    return names, poses
+    chains = [list(c) for c in np.array_split(names, assemblies)]
+    poses = {}
+    for a, c in enumerate(chains):
+        for k, name in enumerate(c):
+            poses[name] = (-k * geometry.body_side, a * ASSEMBLY_SPACING, 0.0)
+    return names, poses, chains
 
 
-def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=None):
-    """Benchmark one configuration; returns the result dict (JSON line fields and extras)."""
+def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=None, assemblies=1):
+    """Benchmark one configuration; returns the result dict (JSON line fields and extras).
+
+    ``assemblies`` > 1: the robots form that many chains side by side (independent subproblems); the
+    first drives, the others hold still (every one is solved every step)."""
     base = settings or load_settings()
     s = replace(base, horizon=horizon, constraint_horizon=min(constraint_horizon, horizon))
     if solver:
         s = replace(s, solver=solver)
     s.check()
     geometry = RobotGeometry()
-    names, poses = chain(robots, geometry)
+    names, poses, chains = chain(robots, geometry, assemblies)
     t_build = time.perf_counter()
     loop = ControlLoop(names, s, geometry)
     setup_s = time.perf_counter() - t_build
-    for a, o in zip(names[:-1], names[1:]):
-        loop.pairs.add_coupled(make_pair(a, o, ANCHOR, geometry))
+    for c in chains:
+        for a, o in zip(c[:-1], c[1:]):
+            loop.pairs.add_coupled(make_pair(a, o, ANCHOR, geometry))
     t = 0.0
     for name, p in poses.items():
         loop.on_pose(name, t, *p)
@@ -68,7 +98,7 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
                                  timeout=(steps + 5) * s.dt), t)
     times, failures, first_ms, lost = [], 0, None, 0
     min_margin = math.inf
-    qp_iterations = []
+    qp_iterations, solver_ms = [], []
     for k in range(steps + 1):
         if k == steps // 2 + 1:        # second half of the S-curve
             loop.request(BehaviorRequest(DRIVE_ASSEMBLY, [names[0]], velocities=[(DRIVE_V, -DRIVE_W)],
@@ -81,6 +111,7 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
         else:
             times.append(ms)
             qp_iterations.append(out.result.iterations)
+            solver_ms.append(out.result.extra.get("solver_ms", float("nan")))
         failures += 0 if out.result.success else 1
         lost += len(out.lost or [])
         sub = s.dt / PLANT_SUBSTEPS
@@ -98,14 +129,17 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
                                                      coupling_polygon(pair, geometry)))
     arr = np.array(times)
     lead_moved = math.hypot(poses[names[0]][0], poses[names[0]][1])
-    return {"robots": robots, "horizon": horizon, "constraint_horizon": s.constraint_horizon,
+    return {"robots": robots, "assemblies": assemblies, "solver_threads": s.solver_threads,
+            "horizon": horizon, "constraint_horizon": s.constraint_horizon,
             "steps": steps, "median_ms": round(float(np.median(arr)), 3),
             "p95_ms": round(float(np.percentile(arr, 95)), 3), "max_ms": round(float(arr.max()), 3),
             "failures": failures, "solver": s.solver, "first_step_ms": round(first_ms, 1),
             "setup_s": round(setup_s, 3), "build_s": round(loop.mpc.build_seconds, 3),
             "coupled_pairs": len(loop.pairs.coupled), "pairs_lost": lost,
             "min_pip_margin_mm": round(1e3 * min_margin, 2), "lead_moved_m": round(lead_moved, 3),
-            "qp_iterations_median": float(np.median(qp_iterations))}
+            "qp_iterations_median": float(np.median(qp_iterations)),
+            "solver_median_ms": round(float(np.median(solver_ms)), 3),
+            "solver_p95_ms": round(float(np.percentile(solver_ms, 95)), 3)}
 
 
 def couple_trials(robots, trials, seed=0, timeout=120.0, settings=None):
@@ -179,6 +213,89 @@ def table(results):
     return "\n".join(lines)
 
 
+def solver_table(results, horizon=10):
+    """Markdown table at one Hm: step median / p95, the solver's part of it, QP iterations, failures, lost pairs."""
+    lines = ["| N | step median / p95 [ms] | in the QP solver: median [ms] | QP iterations | build [s] "
+             "| failures | pairs lost |", "|---|---|---|---|---|---|---|"]
+    for r in sorted((r for r in results if r["horizon"] == horizon), key=lambda r: r["robots"]):
+        lines.append("| %d | %.1f / %.1f | %.1f | %g | %.3f | %d | %d |" % (
+            r["robots"], r["median_ms"], r["p95_ms"], r.get("solver_median_ms", float("nan")),
+            r["qp_iterations_median"], r["build_s"], r["failures"], r["pairs_lost"]))
+    return "\n".join(lines)
+
+
+def reference_table(results, reference):
+    """The RTI (Clarabel) against IPOPT on the full NLP, same run and robots."""
+    rows = ["| N, Hm | RTI + Clarabel: median / p95 [ms] | IPOPT, full NLP: median / p95 [ms] | ratio of medians |",
+            "|---|---|---|---|"]
+    for ref in reference:
+        mine = [r for r in results if (r["robots"], r["horizon"]) == (ref["robots"], ref["horizon"])]
+        if mine:
+            m = mine[0]
+            rows.append("| %d, %d | %.1f / %.1f | %.1f / %.1f | %.0fx |" % (
+                ref["robots"], ref["horizon"], m["median_ms"], m["p95_ms"], ref["median_ms"], ref["p95_ms"],
+                ref["median_ms"] / m["median_ms"]))
+    return "\n".join(rows)
+
+
+def decomposition_table(rows):
+    """Several chains side by side solved jointly, as separate QPs, and on two threads."""
+    out = ["| robots, chains | solved as | step median / p95 [ms] | in the solver, summed over threads [ms] "
+           "| QP iterations | failures |",
+           "|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append("| %d, %d | %s | %.1f / %.1f | %.1f | %g | %d |" % (
+            r["robots"], r["assemblies"], r["mode"], r["median_ms"], r["p95_ms"], r["solver_median_ms"],
+            r["qp_iterations_median"], r["failures"]))
+    return "\n".join(out)
+
+
+def targets_table(results):
+    """The measured targets (TARGETS), no failed solve and no lost pair: met or not."""
+    rows = ["| target | measured | met |", "|---|---|---|"]
+    cell = {(r["robots"], r["horizon"]): r for r in results}
+    for n, h, stat, limit in TARGETS:
+        r = cell.get((n, h))
+        got = "%.1f ms" % r[stat] if r else "not run"
+        rows.append("| %d robots, Hm = %d: %s <= %g ms | %s | %s |" % (
+            n, h, stat.replace("_ms", ""), limit, got, ("yes" if r[stat] <= limit else "**no**") if r else "-"))
+    fails = sum(r["failures"] for r in results)
+    lost = sum(r["pairs_lost"] for r in results)
+    rows.append("| no failed solve | %d failed | %s |" % (fails, "yes" if fails == 0 else "**no**"))
+    rows.append("| no pair lost in the drive | %d lost | %s |" % (lost, "yes" if lost == 0 else "**no**"))
+    return "\n".join(rows)
+
+
+def page_block(doc):
+    """The generated block of docs/mpc.md: set-up line and the tables of one grid run."""
+    res, m = doc["results"], doc["machine"]
+    return "\n\n".join([
+        "`make bench` of %s: %d steps per configuration, Hc = %d, %d cores, load average %s at the end "
+        "(ms; median / p95 of the whole control step)." % (doc["time"], doc["steps"], doc["constraint_horizon"],
+                                                          m["cpu_count"], m["load_avg_1_5_15"]),
+        table(res), "At Hm = 10, where the time goes:", solver_table(res),
+        "Against IPOPT on the full NLP (same run):", reference_table(res, doc.get("reference", [])),
+        "Independent assemblies (chains side by side, the first drives):",
+        decomposition_table(doc.get("decomposition", [])),
+        "Targets:", targets_table(res)])
+
+
+def update_page(path, block):
+    """Replace the text between PAGE_BEGIN and PAGE_END in ``path`` by ``block``."""
+    with open(path) as f:
+        text = f.read()
+    a, b = text.find(PAGE_BEGIN), text.find(PAGE_END)
+    if a < 0 or b < a:
+        raise ValueError("%s: no %s ... %s block" % (path, PAGE_BEGIN, PAGE_END))
+    with open(path, "w") as f:
+        f.write(text[:a + len(PAGE_BEGIN)] + "\n" + block + "\n" + text[b:])
+
+
+def grid(robots=GRID_ROBOTS):
+    """(N, Hm) pairs of the grid."""
+    return [(n, h) for n in robots for h in GRID_HORIZONS if h == 10 or n <= GRID_SHORT_MAX]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description="MPC step time on a coupled chain driving as one assembly.")
     ap.add_argument("--robots", type=int, default=8, help="robots in the chain (N-1 coupled pairs)")
@@ -186,10 +303,18 @@ def main(argv=None):
     ap.add_argument("--constraint-horizon", type=int, default=3, help="constraint horizon Hc <= Hm")
     ap.add_argument("--steps", type=int, default=50, help="control steps measured (>= 50 for the table)")
     ap.add_argument("--solver", choices=("clarabel", "ipopt"), default=None, help="override mpc.yaml's solver")
+    ap.add_argument("--assemblies", type=int, default=1,
+                    help="one configuration: the robots form this many chains side by side; the first drives")
+    ap.add_argument("--solver-threads", type=int, default=None, help="override mpc.yaml's solver_threads")
     ap.add_argument("--json", action="store_true", help="print one JSON line")
     ap.add_argument("--grid", action="store_true",
-                    help="run N in %s x Hm in %s and print the table" % (GRID_ROBOTS, GRID_HORIZONS))
+                    help="run N in %s at Hm = 10 (and 3, 5 up to %d robots), then the IPOPT reference, and print "
+                         "the tables" % (GRID_ROBOTS, GRID_SHORT_MAX))
+    ap.add_argument("--grid-robots", default=None, metavar="N,N,...",
+                    help="with --grid: only these N (development; files are still written if asked)")
     ap.add_argument("--out", action="append", default=[], help="with --grid: write the results as JSON here")
+    ap.add_argument("--page", default=None, help="with --grid: rewrite the generated block of this page "
+                                                 "(docs/mpc.md)")
     ap.add_argument("--couple-trials", type=int, default=0, metavar="T",
                     help="instead: T coupling trials of --robots robots from random starts (kinematic plant)")
     args = ap.parse_args(argv)
@@ -199,8 +324,14 @@ def main(argv=None):
         return 0
     if args.robots < 2 or args.horizon < 1 or args.steps < 1 or args.constraint_horizon < 1:
         ap.error("need --robots >= 2, --horizon >= 1, --constraint-horizon >= 1, --steps >= 1")
+    if not 1 <= args.assemblies <= args.robots // 2 or (args.solver_threads is not None and args.solver_threads < 1):
+        ap.error("need 1 <= --assemblies <= robots / 2 and --solver-threads >= 1")
+    settings = load_settings()
+    if args.solver_threads:
+        settings = replace(settings, solver_threads=args.solver_threads)
     if not args.grid:
-        r = run(args.robots, args.horizon, args.constraint_horizon, args.steps, solver=args.solver)
+        r = run(args.robots, args.horizon, args.constraint_horizon, args.steps, settings=settings,
+                solver=args.solver, assemblies=args.assemblies)
         if args.json:
             print(json.dumps(r))
         else:
@@ -208,23 +339,47 @@ def main(argv=None):
                   % (r["robots"], r["horizon"], r["constraint_horizon"], r["median_ms"], r["p95_ms"],
                      r["failures"], r["solver"]))
         return 0 if r["failures"] == 0 else 1
-    results = []
-    for n in GRID_ROBOTS:
-        for h in GRID_HORIZONS:
-            r = run(n, h, args.constraint_horizon, args.steps, solver=args.solver)
+    robots = GRID_ROBOTS
+    if args.grid_robots:
+        try:
+            robots = tuple(int(v) for v in args.grid_robots.split(","))
+        except ValueError:
+            ap.error("--grid-robots: a comma list of robot counts, got %r" % args.grid_robots)
+        if min(robots) < 2:
+            ap.error("--grid-robots: every N must be >= 2")
+    results, reference = [], []
+    for n, h in grid(robots):
+        r = run(n, h, args.constraint_horizon, args.steps, settings=settings, solver=args.solver)
+        print(json.dumps(r), flush=True)
+        results.append(r)
+    if REFERENCE[0] in robots and args.solver != "ipopt":
+        r = run(REFERENCE[0], REFERENCE[1], args.constraint_horizon, args.steps, settings=settings, solver="ipopt")
+        print(json.dumps(r), flush=True)
+        reference.append(r)
+    decomposition = []
+    for n, k in DECOMPOSITION:
+        if n not in robots:
+            continue
+        for label, over in DECOMPOSITION_MODES:
+            r = run(n, 10, args.constraint_horizon, args.steps, settings=replace(settings, **over), solver=args.solver,
+                    assemblies=k)
+            r["mode"] = label
             print(json.dumps(r), flush=True)
-            results.append(r)
+            decomposition.append(r)
     doc = {"benchmark": "puzzlebot_mpc.bench", "machine": machine(), "steps": args.steps,
-           "time": time.strftime("%Y-%m-%d %H:%M:%S"), "results": results}
+           "constraint_horizon": args.constraint_horizon, "time": time.strftime("%Y-%m-%d %H:%M:%S"),
+           "results": results, "reference": reference, "decomposition": decomposition}
     for path in args.out:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         with open(path, "w") as f:
             json.dump(doc, f, indent=1)
+    block = page_block(doc)
+    if args.page:
+        update_page(args.page, block)
     print()
-    print("MPC step time (ControlLoop.step wall time), chain of N coupled robots driving, Hc = %d, %d steps; "
-          "load average %s" % (args.constraint_horizon, args.steps, doc["machine"]["load_avg_1_5_15"]))
-    print(table(results))
-    return 0 if all(r["failures"] == 0 for r in results) else 1
+    print("MPC step time (ControlLoop.step wall time), chain of N coupled robots driving")
+    print(block)
+    return 0 if all(r["failures"] == 0 for r in results + reference) else 1
 
 
 if __name__ == "__main__":

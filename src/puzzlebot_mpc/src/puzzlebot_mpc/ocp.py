@@ -1,10 +1,12 @@
 """The MPC's optimal control problem, written once in CasADi.
 
-One formulation serves two solvers: the real-time iteration (a Gauss-Newton
-QP per step, solved by Clarabel) and the full NLP (IPOPT). Everything that
-changes per step is a parameter; the structure depends only on the number of
-robots ``n``, the horizons and the *pair slots* (which robot pairs may carry
-alignment costs or coupling constraints).
+One formulation, two forms: this symbolic one (CasADi) is the full NLP that
+IPOPT solves and the reference of puzzlebot_mpc/qp.py, which assembles the
+real-time iteration's Gauss-Newton QP of the same problem in numpy (the
+tests compare the two). Everything that changes per step is a parameter;
+the structure depends only on the number of robots ``n``, the horizons and
+the *pair slots* (which robot pairs may carry alignment costs or coupling
+constraints).
 
 State x = [px, py, theta, v, w], input u = [dv, dw], explicit Euler
 (model.euler_step). The initial pose is measured (a parameter). The initial
@@ -162,6 +164,24 @@ def params_layout(st: Structure):
     return lay
 
 
+def param_vector(par, d):
+    """The flat parameter vector of layout ``par`` from a qp.StepData (the symbolic problem's numbers)."""
+    p = np.zeros(par.size)
+    n, h = d.x0.shape[0], d.vref.shape[1]
+    par.put(p, "x0", d.x0)
+    par.put(p, "goal", d.goal)
+    par.put(p, "goal_on", d.goal_on)
+    par.put(p, "vref", d.vref.reshape(n * h, 2))
+    par.put(p, "vel_on", d.vel_on)
+    par.put(p, "bsign", d.bsign.reshape(-1))
+    if len(d.act):
+        for name in ("pt_i", "pt_j", "act", "conn", "head", "yaw_lim", "yaw_off"):
+            par.put(p, name, getattr(d, name))
+        par.put(p, "poly_g", d.poly_g.reshape(-1, 2))
+        par.put(p, "poly_h", d.poly_h.reshape(-1))
+    return p
+
+
 def _rot(th, v):
     c, s = ca.cos(th), ca.sin(th)
     return ca.vertcat(c * v[0] - s * v[1], s * v[0] + c * v[1])
@@ -303,7 +323,8 @@ class Problem:
 
     # --------------------------------------------------------------- QP data
     def qp_function(self):
-        """CasADi Function (zbar, p) -> [P (upper, nonzeros), q, A (nonzeros), b] and the sparsities.
+        """CasADi Function (zbar, p) -> [P (upper, nonzeros), q, A (nonzeros), b] and the sparsities:
+        the Gauss-Newton QP of the symbolic form (the reference that qp.QPStructure is tested against).
 
         Clarabel form: min 1/2 z'Pz + q'z s.t. A z + s = b, s in {0}^n_eq x R+^n_in.
         Rows of A: linearised dynamics (zero cone), linearised inequalities

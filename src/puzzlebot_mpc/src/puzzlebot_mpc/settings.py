@@ -50,6 +50,9 @@ class MPCSettings:
     solver: str = "clarabel"         # "clarabel" (real-time iteration, sparse QP) or "ipopt" (full NLP)
     sqp_iterations: int = 1          # QPs per step when warm (1 = real-time iteration)
     sqp_iterations_cold: int = 3     # QPs per step after a cold start
+    decompose: bool = True           # independent subproblems (robots neither coupled nor pairing with each
+                                     # other) are separate QPs; the solution is that of the joint QP
+    solver_threads: int = 1          # threads solving those QPs in parallel (1: in turn)
     butterfly_lobe_robots: int = 2   # robots at rest whose direction of travel is chosen by trying both
                                      # butterfly cones (2^k QPs in such a step); 0 = use the preference only
     max_iter: int = 100              # solver iteration cap per QP / NLP
@@ -146,7 +149,8 @@ class MPCSettings:
         """Range and cross-field checks; raise ConfigError."""
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
-                                "sqp_iterations_cold", "pair_epsilon", "pair_lost_margin", "wiggle_period",
+                                "sqp_iterations_cold", "solver_threads", "pair_epsilon", "pair_lost_margin",
+                                "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
                                 "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout",
