@@ -10,7 +10,7 @@ from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc.pairs import ANCHOR, make_pair
 
-S = dk.DockingSettings()
+S = dk.DockingSettings(pull_test=True)       # the full manoeuvre: push, pull, push home again
 DT = 0.1
 
 
@@ -97,7 +97,8 @@ def test_the_monitor_wants_a_reseat_only_after_the_pair_looked_open_for_a_while(
     assert not m.update(0.005, 0.0, 0.1)                 # open, just now
     assert not m.update(0.001, 0.0, 0.2)                 # closed again: forgiven
     times = np.arange(0.3, 0.3 + S.repair_time + 0.05, DT)
-    assert [m.update(0.001, 0.004, t) for t in times][-1]     # off its axis for repair_time
+    assert [m.update(0.005, 0.0, t) for t in times][-1]       # open for repair_time
+    assert not dk.SeatMonitor(S).update(0.001, 0.004, 0.0)    # off its axis alone: not a sign
 
 
 def test_a_jammed_push_aims_the_next_approach_to_the_side_it_was_pushed():

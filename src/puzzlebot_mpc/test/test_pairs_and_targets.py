@@ -235,3 +235,15 @@ def test_mst_matches_brute_force_total_weight():
         best = min(best, w)
     assert total == pytest.approx(best, rel=1e-9)
     assert len(edges) == 4 and np.all(np.isfinite(paths))
+
+
+def test_the_grid_generator_is_two_lines_joined_by_knobs():
+    grid = make_target("grid", generate("grid", 8, GEO), GEO)
+    anchors = sorted((a, b) for a, b, kind in grid.connections if kind == pr.ANCHOR)
+    knobs = sorted((a, b) for a, b, kind in grid.connections if kind == pr.KNOB)
+    assert anchors == [(0, 1), (1, 2), (2, 3), (4, 5), (5, 6), (6, 7)]
+    # the second line is on the first's left (+y): its robots' right holes take the first line's left knobs
+    assert knobs == [(0, 4), (1, 5), (2, 6), (3, 7)]
+    for n in (3, 5, 2):
+        with pytest.raises(TargetError, match="even number of robots, at least 4"):
+            generate("grid", n, GEO)

@@ -83,7 +83,8 @@ def test_unrequested_robots_are_stopped():
 
 @pytest.mark.parametrize("docking", [False, True])
 def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking):
-    settings = MPCSettings(docking=docking)
+    # docking=True here is the straight push of puzzlebot_mpc.docking (dock_insert_by_mpc false)
+    settings = MPCSettings(docking=docking, dock_insert_by_mpc=not docking)
     m = BehaviorManager(["pz1", "pz2"], settings)
 
     def step(now, poses):              # as control_loop.ControlLoop.step does

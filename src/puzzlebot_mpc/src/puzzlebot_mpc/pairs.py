@@ -508,9 +508,19 @@ class PairBook:
             if pi is None or pj is None:
                 continue
             dock = self._docking_of(pair, now)
+            before_status, since = pair.status, pair.since
             status = update_status(pair, pi, pj, self.geometry, self.eps, self.seating, now)
             seated = False
-            if dock is not None:
+            if dock is not None and self.dock_settings.insert_by_mpc and dock.phase == APPROACH:
+                gap, lateral, dtheta = seat_measure(pair, pi, pj)
+                jammed = (before_status == HEAD_ALIGNED and status == DECOUPLED and now is not None
+                          and since is not None and now - since > self.seating.align_timeout)
+                if jammed:                       # pushed in for align_timeout without getting home
+                    dock.jammed(gap, lateral, now)
+                elif status == HEAD_INSERTED and self.dock_settings.pull_test:
+                    dock.start_pull(gap, now)
+                    status = HEAD_ALIGNED
+            elif dock is not None:
                 gap, lateral, dtheta = seat_measure(pair, pi, pj)
                 before = dock.phase
                 seated = dock.update(gap, lateral, dtheta, now)
@@ -573,11 +583,10 @@ class PairBook:
         return dock
 
     def _reseat(self, pair, gap, lateral, now):
-        """A coupled pair found open or askew goes back to the goals: pushed home again if it is only open,
-        approached again from the standoff if it is off its axis."""
+        """A coupled pair found open goes back to the goals, to be pushed home again."""
         del self.coupled[pair.key]
         self.monitors.pop(pair.key, None)
-        start = PUSH if abs(lateral) <= self.dock_settings.repair_lateral else BACKOFF
+        start = PUSH
         groups = self.groups()
         mover = mover_of(pair, len(groups.get(pair.robot_i, ())) or 1, len(groups.get(pair.robot_j, ())) or 1)
         self.docking[pair.key] = Docking(self.dock_settings, mover, start=start, now=None)

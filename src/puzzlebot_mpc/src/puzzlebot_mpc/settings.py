@@ -108,20 +108,21 @@ class MPCSettings:
     dock_push_timeout: float = _DOCK.push_timeout # s: not home after this long: back off, approach again
     dock_home_gap: float = _DOCK.home_gap         # m: faces this close: pushed home ...
     dock_home_steps: int = _DOCK.home_steps       # ... on this many control steps in a row
+    dock_insert_by_mpc: bool = _DOCK.insert_by_mpc  # the MPC pushes the anchor in; a jam aims the next approach
+    dock_pull_test: bool = _DOCK.pull_test        # prove a pair pushed home seated by pulling on it
     dock_pull_speed: float = _DOCK.pull_speed     # m/s: the pull test ...
     dock_pull_time: float = _DOCK.pull_time       # s: ... for this long
     dock_seat_pull_min: float = _DOCK.seat_pull_min # m: a seated pair stretches at least this much under the pull ...
     dock_seat_pull_max: float = _DOCK.seat_pull_max # m: ... and at most this much (anchor_trials seatpull measures it)
     dock_pull_stall: float = _DOCK.pull_stall     # m: the pull has stalled when the gap grew less in a step
-    dock_seat_lateral: float = _DOCK.seat_lateral # m: seated only with C_a this close to the opening's axis
+    dock_repush_gap: float = _DOCK.repush_gap     # m: ... until the faces are this close (0: none)
     dock_repush_speed: float = _DOCK.repush_speed # m/s: the push home after the pull
     dock_repush_timeout: float = _DOCK.repush_timeout # s: home again after the pull within this, or back off
     dock_backoff_speed: float = _DOCK.backoff_speed # m/s
     dock_aim_step: float = _DOCK.aim_step         # m: after a jammed push, aim the mouth this much to the side ...
     dock_aim_max: float = _DOCK.aim_max           # m: ... up to this far off the partner's axis
     dock_backoff_time: float = _DOCK.backoff_time # s
-    dock_repair_lateral: float = _DOCK.repair_lateral # m: a coupled pair's C_a this far off the opening's axis ...
-    dock_repair_gap: float = _DOCK.repair_gap     # m: ... or its faces this far apart ...
+    dock_repair_gap: float = _DOCK.repair_gap     # m: a coupled pair with its faces this far apart ...
     dock_repair_time: float = _DOCK.repair_time   # s: ... for this long is re-seated (while a couple runs)
 
     def docking_settings(self):
