@@ -320,6 +320,32 @@ def select_active(candidates, busy=(), order=None):
     return chosen
 
 
+class CoupledPairs(dict):
+    """The coupled pairs {key: ConnectionPair}; ``version`` counts the changes (for caches of the assemblies)."""
+
+    version = 0
+
+    def __setitem__(self, key, value):
+        self.version += 1
+        super().__setitem__(key, value)
+
+    def __delitem__(self, key):
+        self.version += 1
+        super().__delitem__(key)
+
+    def pop(self, key, *default):
+        self.version += 1
+        return super().pop(key, *default)
+
+    def clear(self):
+        self.version += 1
+        super().clear()
+
+    def update(self, *args, **kwargs):
+        self.version += 1
+        super().update(*args, **kwargs)
+
+
 @dataclass
 class PairBook:
     """Goal, active and coupled pairs of the stack (Algorithm 3's lists).
@@ -333,7 +359,7 @@ class PairBook:
     eps: float
     lost_margin: float
     seating: Seating = Seating()
-    coupled: Dict[Tuple[str, str], ConnectionPair] = field(default_factory=dict)
+    coupled: Dict[Tuple[str, str], ConnectionPair] = field(default_factory=CoupledPairs)
     goals: List[ConnectionPair] = field(default_factory=list)
     active: List[ConnectionPair] = field(default_factory=list)
     priority: Optional[Dict[Tuple[str, str], float]] = None
@@ -350,6 +376,21 @@ class PairBook:
         """The pair book of an MPC's settings (MPCSettings: status margins, seating, docking)."""
         return cls(geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating(),
                    dock_settings=settings.docking_settings(), max_seeds=settings.assembly_seeds)
+
+    def assemblies(self, names):
+        """{robot: its assembly (robots in ``names`` order)} over the coupled pairs, computed once per change
+        of the coupled pairs (the behaviours ask for it for every pair, every step)."""
+        version, names = getattr(self.coupled, "version", None), tuple(names)
+        cache = getattr(self, "_assemblies", None)
+        if version is None or cache is None or cache[0] != version:
+            cache = self._assemblies = (version, {})
+        if names not in cache[1]:
+            out = {}
+            for g in components(list(names), list(self.coupled.values())):
+                for r in g:
+                    out[r] = g
+            cache[1][names] = out
+        return cache[1][names]
 
     def all_pairs(self):
         """Every known pair, each once: coupled first, then goals not yet coupled."""
@@ -474,15 +515,10 @@ class PairBook:
         return out
 
     def groups(self):
-        """{robot: its assembly as a sorted tuple of names} over the coupled pairs (single robots: (name,))."""
-        coupled = list(self.coupled.values())
-        robots = sorted({r for q in self.coupled.values() for r in q.robots}
-                        | {r for q in self.goals for r in q.robots})
-        group_of = {}
-        for g in components(robots, coupled):
-            for r in g:
-                group_of[r] = tuple(sorted(g))
-        return group_of
+        """{robot: its assembly as a sorted tuple of names} over the coupled pairs (single robots: (name,)),
+        for the robots of the coupled and goal pairs."""
+        robots = sorted({r for q in self.coupled.values() for r in q.robots} | {r for q in self.goals for r in q.robots})
+        return {r: tuple(sorted(g)) for r, g in self.assemblies(robots).items()}
 
     def mover(self, pair):
         """"i", "j" or None (both hold: a loop closure) for an active pair (mover_of when not assigned)."""

@@ -113,7 +113,7 @@ class Context:
 
     def assembly_of(self, robot):
         """The robots coupled to ``robot`` (directly or through others), itself included, in ``names`` order."""
-        return pr.assembly_of(robot, self.names, self.pairs.coupled.values())
+        return self.pairs.assemblies(self.names).get(robot, [robot])
 
     def mover(self, pair):
         """"i", "j" or None: the robot of a pair that docks (pairs.PairBook.mover: the smaller assembly; the

@@ -162,7 +162,8 @@ class BehaviorManager:
             pi, pj = pr.alignment_points(p, poses.get(p.robot_i) if poses else None,
                                          poses.get(p.robot_j) if poses else None,
                                          (s.approach_lookahead, s.approach_standoff_max, s.approach_gain_angle,
-                                          s.approach_gain_lateral), mover=self._ctx.mover(p) or "j",
+                                          s.approach_gain_lateral),
+                                         mover="j" if coupled else self._ctx.mover(p) or "j",
                                          aim=self.pairs.docking[p.key].aim if p.key in self.pairs.docking else 0.0)
             obj.pairs.append(PairObjective(self.index[p.robot_i], self.index[p.robot_j], pi, pj,
                                            active=p.key in active and not coupled, coupled=coupled,
