@@ -9,12 +9,13 @@ differ.
 from dataclasses import dataclass
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.hardware import CONTROL_PERIOD, V_MAX, W_MAX
 from puzzlebot_common.params import from_mapping, require_positive
 
 
 @dataclass(frozen=True)
 class MPCSettings:
-    dt: float = 0.1                  # s: control period and Euler step
+    dt: float = CONTROL_PERIOD       # s: control period and Euler step
     horizon: int = 10                # Hm: prediction steps
     constraint_horizon: int = 3      # Hc <= Hm: steps with coupling constraints
     v_max: float = 0.05              # m/s: |v| limit
@@ -68,8 +69,8 @@ class MPCSettings:
     insert_yaw_tolerance: float = 0.1    # rad: ... and the pair's headings agree this well
     insert_confirm_steps: int = 3    # consecutive control steps the head_inserted condition must hold
     insert_timeout: float = 4.0      # s: head_aligned for longer (a jammed anchor): back off, line up again
-    hardware_v_max: float = 0.2      # m/s: the robots' own speed limit (open-loop commands stay within it)
-    hardware_w_max: float = 6.0      # rad/s: the robots' own turn-rate limit
+    hardware_v_max: float = V_MAX    # m/s: the robots' own speed limit (open-loop commands stay within it)
+    hardware_w_max: float = W_MAX    # rad/s: the robots' own turn-rate limit
     wiggle_v_bias: float = 0.03      # m/s: forward speed of the anchor robot while it wiggles out
     wiggle_w_amplitude: float = 3.0  # rad/s: wiggle turn rate amplitude (paper: w_max), the turn rate limit of
                                      # the closed-loop swing; sent directly: within the hardware limits, not

@@ -21,6 +21,8 @@ from dataclasses import dataclass, fields
 from typing import Tuple
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_common.hardware import CONTROL_PERIOD, MOCAP_RATE
 from puzzlebot_common.params import from_mapping, require_positive
 
 #: Bullet's collision margin for URDF shapes [m]. A box half-extent or a
@@ -41,7 +43,7 @@ class RobotParams:
     """Simulated PuzzleBot body (config/robot.yaml, ``robot``)."""
 
     # body
-    body_side: float = 0.05          # m, square body, origin at its centre
+    body_side: float = RobotGeometry.body_side  # m, square body, origin at its centre
     body_height: float = 0.045       # m
     body_mass: float = 0.068         # kg (whole robot incl. wheels' share)
     ground_clearance: float = 0.003  # m, body bottom above the floor
@@ -68,7 +70,7 @@ class RobotParams:
     caster_radius: float = 0.005     # m
     caster_x: float = 0.018          # m, casters at (+/-caster_x, 0)
     caster_clearance: float = 0.0005  # m, caster bottom above the floor: the wheels carry the weight
-    wheel_base: float = 0.04         # m, track used to split (v, w) into wheel speeds
+    wheel_base: float = RobotGeometry.wheel_base  # m, track used to split (v, w) into wheel speeds
     # front opening: a mouth between two lips, the slits (a cavity) behind, the battery box behind that
     opening_z: float = -0.010        # m, height of the opening's (and the anchor's) centre line above base_link
     mouth_width: float = 0.0085      # m, gap between the lips
@@ -90,7 +92,7 @@ class RobotParams:
     holder_slot_width: float = 0.0050  # m, slot in the retaining wall: the anchor's yaw play
     holder_slot_height: float = 0.0045  # m: the bar rests on the slot's bottom (pitch play)
     # side connectors for rigid (bridge) coupling: knob on the left (+y), hole on the right (-y)
-    knob_radius: float = 0.0045      # m
+    knob_radius: float = RobotGeometry.knob_radius  # m
     knob_height: float = 0.010       # m, vertical cylinder, half sunk into the left side
     knob_z: float = 0.008            # m, knob centre height above the body centre
     hole_width: float = 0.010        # m (x)
@@ -311,12 +313,12 @@ class SimParams:
     """Sim node / SimWorld options (config/sim.yaml, ``sim``)."""
 
     physics_rate: int = 200          # Hz, Bullet fixed step (accuracy vs speed: docs/sim.md)
-    pose_rate: int = 100             # Hz, vicon topics and tf
+    pose_rate: int = MOCAP_RATE      # Hz, vicon topics, tf and /clock (the lab's Vicon rate)
     pairs_rate: int = 10             # Hz, physical_pairs topic
     real_time_factor: float = 0.0    # 1 = wall-clock pace, 0 = as fast as possible
     cmd_timeout: float = 0.5         # s, sim time
     sync_topic: str = ""             # lockstep with a controller (empty: off)
-    sync_period: float = 0.1         # s
+    sync_period: float = CONTROL_PERIOD  # s, the controller's period (the MPC's dt)
     sync_timeout: float = 10.0       # s, wall
     sync_startup_timeout: float = 60.0  # s, wall
     sync_cmd_timeout: float = 1.0    # s, wall: then wait for the commands of that control step
