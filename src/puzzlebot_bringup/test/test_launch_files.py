@@ -10,6 +10,7 @@ import pytest
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_driver.params import driver_config, emulator_config
+from puzzlebot_sim.params import SimParams
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PKG = os.path.dirname(HERE)
@@ -40,6 +41,12 @@ def test_every_arg_is_documented(name):
         assert a.get("doc"), "%s.launch: arg %s has no doc" % (name, a.get("name"))
 
 
+def sim_params(config):
+    """The SimParams the sim node builds from its ~sim parameters (the defaults for keys not set)."""
+    prefix = "/sim/sim/"
+    return SimParams.from_dict({k[len(prefix):]: p.value for k, p in config.params.items() if k.startswith(prefix)})
+
+
 def test_sim_launch_defaults_and_options():
     c = load_launch("sim")
     assert node_names(c) == ["mpc", "scenario_runner", "sim"]
@@ -47,7 +54,7 @@ def test_sim_launch_defaults_and_options():
     assert c.params["/sim/sim/world"].value == "flat" and c.params["/use_sim_time"].value is True
     assert c.params["/sim/sim/mocap_position_std"].value == 0.0003 and c.params["/sim/sim/seed"].value == 0
     c = load_launch("sim", mocap="ideal", seed="7")
-    assert c.params["/sim/sim/mocap_position_std"].value == 0.0 and c.params["/sim/sim/seed"].value == 7
+    assert sim_params(c).mocap_position_std == 0.0 and c.params["/sim/sim/seed"].value == 7
     c = load_launch("sim", scenario="chain_step", robots="2", rviz="true", record="true", bag="/tmp/x.bag")
     assert node_names(c) == ["markers", "mpc", "record", "rviz", "scenario_runner", "sim"]
     robots = parse_robot_list(c.params["/puzzlebot/robots"].value)
