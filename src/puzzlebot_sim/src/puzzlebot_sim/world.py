@@ -36,7 +36,7 @@ from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
 from puzzlebot_sim.anchor_rest import AnchorRest, NoAnchorRest
 from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.mocap import MocapModel
-from puzzlebot_sim.params import AnchorParams, AnchorRestParams, WorldParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, SimParams, WorldParams
 from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
                                 robot_urdf)
 from puzzlebot_sim.worlds import WORLDS
@@ -168,7 +168,7 @@ class SimWorld(BulletSession):
     ``world`` (name in puzzlebot_sim.worlds.WORLDS), ``physics_rate`` [Hz],
     ``gui``; keyword-only: ``anchor_params`` (AnchorParams, None = robots
     without anchors), ``world_params`` (WorldParams), ``solver_iterations``,
-    ``erp``, ``seed`` (mocap noise), ``actuator_model`` (a
+    ``erp``, ``seed`` (mocap noise; the stepping defaults are SimParams'), ``actuator_model`` (a
     puzzlebot_common.effects.ActuatorModel applied to each robot's commands,
     its ``robots:`` entries by robot name; None = ideal), ``wheel_imbalance``
     (right wheel x (1 + k), left x (1 - k)),
@@ -182,10 +182,11 @@ class SimWorld(BulletSession):
     ``robots``: name -> SimRobot (Bullet body ids, command, motor settings), in start order.
     """
 
-    def __init__(self, robot_params, starts, world="flat", physics_rate=200, gui=False, *,
-                 anchor_params=AnchorParams(), world_params=None, solver_iterations=15, erp=0.2, seed=0,
-                 actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel(),
-                 anchor_rest=AnchorRestParams(), tilted_solver_iterations=100, tilt_threshold=0.15):
+    def __init__(self, robot_params, starts, world="flat", physics_rate=SimParams.physics_rate, gui=False, *,
+                 anchor_params=AnchorParams(), world_params=None, solver_iterations=SimParams.solver_iterations,
+                 erp=SimParams.erp, seed=0, actuator_model=None, wheel_imbalance=0.0, mocap=MocapModel(),
+                 anchor_rest=AnchorRestParams(), tilted_solver_iterations=SimParams.tilted_solver_iterations,
+                 tilt_threshold=SimParams.tilt_threshold):
         if world not in WORLDS:
             raise ConfigError("unknown world %r; known worlds: %s" % (world, ", ".join(sorted(WORLDS))))
         if not starts:
