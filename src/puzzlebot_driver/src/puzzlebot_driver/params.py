@@ -77,16 +77,16 @@ class DriverParams:
     v_limit: float = V_MAX            # m/s, |v| above is rejected (the hardware limit)
     w_limit: float = W_MAX            # rad/s, |w| above is rejected (the hardware limit)
     v_stop: float = 0.001             # m/s, |v| below and |w| below w_stop = a stop: PWM 0
-    w_stop: float = 0.01              # rad/s
+    w_stop: float = 0.01              # rad/s, see v_stop
     max_clock_skew: float = 0.05      # s, a pose stamped further in the future is rejected
     estimator_window: float = 0.05    # s, span of the finite difference over mocap poses
     estimator_tau: float = 0.03       # s, low-pass time constant of the estimate (0: none)
     estimator_max_gap: float = 0.2    # s, a longer gap between poses restarts the estimate
     mocap_rate_window: float = 1.0    # s, window of the reported mocap rate
     diagnostics_rate: float = 1.0     # Hz, /diagnostics
-    keepalive_idle: float = 2.0       # s, TCP keepalive: a silent dead robot is dropped after
-    keepalive_interval: float = 1.0   # s      idle + count * interval
-    keepalive_count: int = 3
+    keepalive_idle: float = 2.0       # s, TCP keepalive: a silent dead robot is dropped after idle + count x interval
+    keepalive_interval: float = 1.0   # s, between keepalive probes
+    keepalive_count: int = 3          # unanswered probes before the link is dropped
     ack_timeout: float = 3.0          # s, data unacknowledged this long drops the link (TCP_USER_TIMEOUT)
     send_stall_timeout: float = 1.0   # s, a robot that accepts no data this long is disconnected
 
