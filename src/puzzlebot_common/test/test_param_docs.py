@@ -53,4 +53,5 @@ def test_blocks_are_filled_and_a_stale_page_is_found(tmp_path):
 
 def test_an_unknown_class_names_the_block():
     with pytest.raises(ConfigError, match="params block puzzlebot_common.geometry.Nope: no such class"):
-        rewrite_text("<!-- BEGIN params puzzlebot_common.geometry.Nope -->\n<!-- END params puzzlebot_common.geometry.Nope -->")
+        rewrite_text("<!-- BEGIN params puzzlebot_common.geometry.Nope -->\n"
+                     "<!-- END params puzzlebot_common.geometry.Nope -->")

@@ -5,7 +5,7 @@ slopes up from the robot already on the floor, and the two close towards
 each other over the coupling. In the model, that fold stops where the
 bodies' top edges meet or where the anchor stops pitching in its holder.
 Beyond that point the top corners become a fulcrum that levers the anchor
-out (src/puzzlebot_experiments/notes/sim-trials.md, "Why the chain is a beam"). How far the real robots fold
+out (notes/sim-trials.md, "Why the chain is a beam"). How far the real robots fold
 is not in the sources, so it is one of the things to measure on them
 (docs/lab-measurements.md, item 3).
 
