@@ -22,13 +22,16 @@ GRID_ROBOTS = (2, 4, 8, 16, 32, 64)
 PAGE_BLOCK = "speed_table"
 
 
-def run_grid(robots=GRID_ROBOTS, sim_seconds=10.0, repeat=3, seed=0, sim=None, anchor_rest=None, progress=None):
+def run_grid(robots=GRID_ROBOTS, sim_seconds=10.0, repeat=3, seed=0, sim=None, anchor_rest=None, anchors=True,
+             progress=None):
     """Median speed_test figures per robot count: {"rows": [...], "load_avg": [...], ...}.
 
     ``sim`` (SimParams) and ``anchor_rest`` (AnchorRestParams) as for speed_test (None: defaults);
-    ``progress(text)`` is called after every run.
+    ``anchors`` False: robots without anchors; ``progress(text)`` is called after every run.
     """
     kwargs = {k: v for k, v in (("sim", sim), ("anchor_rest", anchor_rest)) if v is not None}
+    if not anchors:
+        kwargs["anchor"] = None
     rate = (sim or SimParams()).physics_rate
     runs = {n: [] for n in robots}
     load = [os.getloadavg()[0]]
@@ -52,6 +55,7 @@ def run_grid(robots=GRID_ROBOTS, sim_seconds=10.0, repeat=3, seed=0, sim=None, a
                      "coupled_pairs_at_end": rs[0]["coupled_pairs_at_end"],
                      "resting_anchors_at_end": rs[0]["resting_anchors_at_end"]})
     return {"rows": rows, "sim_seconds": sim_seconds, "repeat": repeat, "seed": seed, "physics_rate": rate,
+            "anchors": anchors,
             "load_avg": [round(min(load), 2), round(max(load), 2)], "cores": os.cpu_count(),
             "python": platform.python_version(), "wall_s": round(time.monotonic() - t0, 1)}
 
@@ -71,8 +75,9 @@ def table(grid):
              "| coupled pairs / resting anchors at the end | "
              + " | ".join("%d / %d" % (r["coupled_pairs_at_end"], r["resting_anchors_at_end"]) for r in rows) + " |",
              "",
-             "`speed_test --grid` (%g s simulated, %d runs per count interleaved, seed %d): %d cores, Python %s, "
+             "`speed_test --grid%s` (%g s simulated, %d runs per count interleaved, seed %d): %d cores, Python %s, "
              "load average %.1f-%.1f while it ran, %.0f s in all."
-             % (grid["sim_seconds"], grid["repeat"], grid["seed"], grid["cores"] or 0, grid["python"],
+             % ("" if grid.get("anchors", True) else " --no-anchors", grid["sim_seconds"], grid["repeat"], grid["seed"],
+                grid["cores"] or 0, grid["python"],
                 grid["load_avg"][0], grid["load_avg"][1], grid["wall_s"])]
     return "\n".join(lines)
