@@ -217,6 +217,9 @@ class SimWorld(BulletSession):
         self.mocap = mocap
         self.wheel_imbalance = wheel_imbalance
         c = self._connect(gui, "puzzlebot_urdf_")
+        # headless: the URDFs' visual shapes are not built (Bullet shows the collision shapes instead;
+        # loading a robot takes 2.7 ms instead of 6.4, an anchor 1.6 instead of 2.0)
+        self._urdf_flags = URDF_FLAGS if gui else URDF_FLAGS | pb.URDF_IGNORE_VISUAL_SHAPES
         pb.resetSimulation(physicsClientId=c)
         pb.setGravity(0, 0, -GRAVITY, physicsClientId=c)
         pb.setTimeStep(self.dt, physicsClientId=c)
@@ -275,7 +278,7 @@ class SimWorld(BulletSession):
         z0 = self.terrain.height(s.x, s.y)
         orn = pb.getQuaternionFromEuler([0, 0, s.yaw])
         body = pb.loadURDF(path, [s.x, s.y, z0 + p.body_centre_height + 1e-4], orn,
-                           flags=URDF_FLAGS, physicsClientId=c)
+                           flags=self._urdf_flags, physicsClientId=c)
         joints, links = {}, {}
         for j in range(pb.getNumJoints(body, physicsClientId=c)):
             info = pb.getJointInfo(body, j, physicsClientId=c)
@@ -313,7 +316,7 @@ class SimWorld(BulletSession):
     def _load_anchor(self, position, orientation):
         c, a = self.client, self.anchor_params
         path = self._urdf("anchor", lambda: anchor_urdf(a))
-        body = pb.loadURDF(path, position, orientation, flags=URDF_FLAGS, physicsClientId=c)
+        body = pb.loadURDF(path, position, orientation, flags=self._urdf_flags, physicsClientId=c)
         for link in range(-1, pb.getNumJoints(body, physicsClientId=c)):
             pb.changeDynamics(body, link, lateralFriction=a.barb_friction if link > 0 else a.friction,
                               physicsClientId=c)
