@@ -39,6 +39,7 @@ from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.behaviors import DRIVE_ASSEMBLY, BehaviorRequest
 from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.control_loop import ControlLoop
+from puzzlebot_mpc.controller import SOLVERS
 from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.pairs import ANCHOR, coupling_polygon, head_margin, make_pair
 
@@ -302,7 +303,7 @@ def main(argv=None):
     ap.add_argument("--horizon", type=int, default=10, help="prediction horizon Hm")
     ap.add_argument("--constraint-horizon", type=int, default=3, help="constraint horizon Hc <= Hm")
     ap.add_argument("--steps", type=int, default=50, help="control steps measured (>= 50 for the table)")
-    ap.add_argument("--solver", choices=("clarabel", "ipopt"), default=None, help="override mpc.yaml's solver")
+    ap.add_argument("--solver", choices=SOLVERS, default=None, help="override mpc.yaml's solver")
     ap.add_argument("--assemblies", type=int, default=1,
                     help="one configuration: the robots form this many chains side by side; the first drives")
     ap.add_argument("--solver-threads", type=int, default=None, help="override mpc.yaml's solver_threads")

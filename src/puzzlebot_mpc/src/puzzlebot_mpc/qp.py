@@ -291,6 +291,42 @@ class QPStructure:
         self.nA = len(rr)
         self._ub_vals = np.ones(len(self.ub_vars))
         self._lb_vals = -np.ones(len(self.lb_vars))
+        self._bound_form(rpos)
+
+    def _bound_form(self, rpos):
+        """The same QP with its single-variable rows (the command's rate limit, the variable bounds) as
+        bounds lb <= z <= ub: ``general`` (solver-order rows kept: the zero cone, butterfly and coupling
+        rows), the CSC pattern of A restricted to them (``G_indices``, ``G_indptr``, ``m_general``), and
+        for each single-variable row its variable and its entry in A's data (``bound_var``,
+        ``bound_entry``); ``slack_solver`` marks the slacks in the solver's order, ``bf_rows`` the butterfly
+        rows (stage, robot, sign) among the general inequality rows."""
+        single = np.zeros(self.m, bool)
+        for name, V, pat, r0 in self._row_blocks:
+            if name.startswith("rate") or name in ("ub", "lb"):
+                single[rpos[r0 + np.arange(V.shape[0] * pat.shape[0])]] = True
+        self.general = np.flatnonzero(~single)
+        keep = ~single[self.A_indices]
+        newrow = np.cumsum(~single) - 1
+        cols = np.repeat(np.arange(self.lay.nz), np.diff(self.A_indptr))
+        self.G_entries = np.flatnonzero(keep)
+        self.G_indices = newrow[self.A_indices[keep]].astype(np.int64)
+        self.G_indptr = np.searchsorted(cols[keep], np.arange(self.lay.nz + 1)).astype(np.int64)
+        self.m_general = len(self.general)
+        rows_of_entry = self.A_indices
+        srows = np.flatnonzero(single)
+        entry_of_row = np.empty(self.m, np.int64)
+        entry_of_row[rows_of_entry] = np.arange(self.nA)       # single rows have exactly one entry
+        self.bound_rows = srows
+        self.bound_entry = entry_of_row[srows]
+        self.bound_var = cols[self.bound_entry]
+        self.slack_solver = self.lay.slack[self.vorder]
+        general_of = np.full(self.m, -1)
+        general_of[self.general] = np.arange(self.m_general)
+        self.bf_rows = np.zeros((0, 0, 2), int)   # (H+1, n, 2): the butterfly rows among the inequality rows
+        for name, V, pat, r0 in self._row_blocks:
+            if name == "bf":
+                r = r0 + np.arange(V.shape[0] * 2).reshape(self.st.horizon + 1, self.st.n, 2)
+                self.bf_rows = general_of[rpos[r]] - self.n_eq
 
     def _solver_order(self):
         """The solver's variable order (``vorder``: original indices; ``vpos``: the inverse): robot by
@@ -450,6 +486,18 @@ class QPStructure:
         q += self.lin
         avals, bvals = self._rows(zbar, d)
         return Px, q[self.vorder], avals[self.a_perm], bvals[self.rorder]
+
+    def bounded(self, Ax, b):
+        """(A data of the general rows (pattern ``G_indices``, ``G_indptr``), their b, lb, ub) of the QP
+        assembled as (Ax, b): the same feasible set, its single-variable rows as bounds."""
+        nz = self.lay.nz
+        coef = Ax[self.bound_entry]
+        val = b[self.bound_rows] / coef
+        lb, ub = np.full(nz, -np.inf), np.full(nz, np.inf)
+        up = coef > 0
+        np.minimum.at(ub, self.bound_var[up], val[up])
+        np.maximum.at(lb, self.bound_var[~up], val[~up])
+        return Ax[self.G_entries], b[self.general], lb, ub
 
     def from_solver(self, zs):
         """Variables in the layout's order from the solver's."""
