@@ -44,7 +44,7 @@ class MPCSettings:
     w_slack_butterfly: float = 1.0e5  # s/rad: exact-penalty weight of a butterfly-set violation
     slack_regularisation: float = 1.0e-2  # small quadratic weight on slacks (strictly convex QP)
     pip_margin: float = 0.001        # m: coupling polygons are tightened by this much in the constraint
-    solver: str = "clarabel"         # real-time iteration, one sparse QP per step, solved by "active_set" (the
+    solver: str = "active_set"       # real-time iteration, one sparse QP per step, solved by "active_set" (the
                                      # primal-dual active-set method, warm-started) or "clarabel" (interior
                                      # point); or "ipopt" (the full NLP, the reference)
     active_set_iterations: int = 10  # working sets tried per QP by active_set before Clarabel solves it
