@@ -76,6 +76,11 @@ class StepData:
                         self.poly_h[slots], self.yaw_lim[slots], self.yaw_off[slots])
 
 
+def _matvec(M, x):
+    """Batched matrix-vector products: (B, m, k) @ (B, k) -> (B, m)."""
+    return np.matmul(M, x[:, :, None])[:, :, 0]
+
+
 _HALFPLANES = {}
 
 
@@ -478,9 +483,9 @@ class QPStructure:
             if r.shape[0] == 0:
                 pvals.append(np.zeros(0))
                 continue
-            pvals.append((2.0 * np.einsum("bma,bma->ba", J[:, :, a], J[:, :, b])).ravel())
-            t = r - np.einsum("bmk,bk->bm", J, zbar[V])
-            q += np.bincount(V.ravel(), (2.0 * np.einsum("bmk,bm->bk", J, t)).ravel(), nz)
+            pvals.append((2.0 * np.matmul(J.transpose(0, 2, 1), J)[:, a, b]).ravel())    # 9x the einsum at 128 robots
+            t = r - _matvec(J, zbar[V])
+            q += np.bincount(V.ravel(), (2.0 * np.matmul(t[:, None, :], J)[:, 0, :]).ravel(), nz)
         pvals.append(self.reg)
         Px = np.bincount(self.p_inv, np.concatenate(pvals), self.nP)
         q += self.lin
@@ -525,7 +530,7 @@ class QPStructure:
         J0[:, 3, 7], J0[:, 4, 8] = -dt, -dt
         z0 = np.concatenate([X[1], X[0, :, 3:5], U[0]], axis=1)
         vals.append(J0[:, self._pat("dyn0")])
-        bs.append(np.einsum("bmk,bk->bm", J0, z0) - eqv[0])
+        bs.append(_matvec(J0, z0) - eqv[0])
         if H > 1:
             ck, sk, vk = c[1:].reshape(-1), sn[1:].reshape(-1), v[1:].reshape(-1)
             B = (H - 1) * n
@@ -538,7 +543,7 @@ class QPStructure:
             Jk[:, 3, 10] = Jk[:, 4, 11] = -dt
             zk = np.concatenate([X[2:], X[1:-1], U[1:]], axis=2).reshape(B, 12)
             vals.append(Jk[:, self._pat("dynk")])
-            bs.append(np.einsum("bmk,bk->bm", Jk, zk) - eqv[1:].reshape(B, 5))
+            bs.append(_matvec(Jk, zk) - eqv[1:].reshape(B, 5))
         # the command's rate limit: |vw_0 - previous command| <= lim dt
         for cc in self.rate:
             lim = (s.dv_max, s.dw_max)[cc] * dt
@@ -589,7 +594,7 @@ class QPStructure:
         Jq[:, 0, 2], Jq[:, 1, 2] = cj * dhx + sj * dhy, -sj * dhx + cj * dhy
         Jq[:, :, 3:5] = -Jq[:, :, 0:2]
         Jq[:, 0, 5], Jq[:, 1, 5] = -sj * wx + cj * wy, -cj * wx - sj * wy
-        Jg = conn[:, None, None] * np.einsum("brc,bck->brk", G, Jq)             # (B, 4, 6)
+        Jg = conn[:, None, None] * np.matmul(G, Jq)             # (B, 4, 6)
         g = conn[:, None] * (G[:, :, 0] * qx[:, None] + G[:, :, 1] * qy[:, None] - hh)
         ys = YAW_ROW_SCALE * conn
         yaw_lim, yaw_off = np.tile(d.yaw_lim, Hc), np.tile(d.yaw_off, Hc)
@@ -605,7 +610,7 @@ class QPStructure:
         sl = zbar[L.sp_idx[ks].reshape(-1)]
         gv = gv - sl[:, None]
         zb = np.concatenate([xi, xj, sl[:, None]], axis=1)
-        b = np.einsum("brk,bk->br", A, zb) - gv
+        b = _matvec(A, zb) - gv
         return A[:, self._pat("pip")], b
 
     def matrices(self, Px, Ax):
