@@ -324,6 +324,9 @@ class QPStructure:
         self.bound_rows = srows
         self.bound_entry = entry_of_row[srows]
         self.bound_var = cols[self.bound_entry]
+        order = np.argsort(self.bound_var, kind="stable")      # the rows of each variable together
+        self._bound_order = order
+        self._bound_vars, self._bound_starts = np.unique(self.bound_var[order], return_index=True)
         self.slack_solver = self.lay.slack[self.vorder]
         general_of = np.full(self.m, -1)
         general_of[self.general] = np.arange(self.m_general)
@@ -496,12 +499,14 @@ class QPStructure:
         """(A data of the general rows (pattern ``G_indices``, ``G_indptr``), their b, lb, ub) of the QP
         assembled as (Ax, b): the same feasible set, its single-variable rows as bounds."""
         nz = self.lay.nz
-        coef = Ax[self.bound_entry]
-        val = b[self.bound_rows] / coef
+        o = self._bound_order
+        coef = Ax[self.bound_entry[o]]
+        val = b[self.bound_rows[o]] / coef
         lb, ub = np.full(nz, -np.inf), np.full(nz, np.inf)
-        up = coef > 0
-        np.minimum.at(ub, self.bound_var[up], val[up])
-        np.maximum.at(lb, self.bound_var[~up], val[~up])
+        if len(o):
+            up = coef > 0
+            ub[self._bound_vars] = np.minimum.reduceat(np.where(up, val, np.inf), self._bound_starts)
+            lb[self._bound_vars] = np.maximum.reduceat(np.where(up, -np.inf, val), self._bound_starts)
         return Ax[self.G_entries], b[self.general], lb, ub
 
     def from_solver(self, zs):
