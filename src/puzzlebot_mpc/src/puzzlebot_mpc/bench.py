@@ -240,9 +240,9 @@ def solver_table(results, horizon=10):
 
 def solver_comparison_table(results, clarabel):
     """The default solver against Clarabel, the same N run right after each other."""
+    name = results[0].get("solver", "default") if results else "default"
     rows = ["| N, Hm | %s: step median / p95 [ms] | Clarabel: step median / p95 [ms] | in the solver: %s / "
-            "Clarabel, median [ms] | QP iterations | ratio of step medians |" % (
-                (results[0].get("solver", "default") if results else "default"), (results[0].get("solver", "default") if results else "default")),
+            "Clarabel, median [ms] | QP iterations | ratio of step medians |" % (name, name),
             "|---|---|---|---|---|---|"]
     for ref in clarabel:
         mine = [r for r in results if (r["robots"], r["horizon"]) == (ref["robots"], ref["horizon"])]
