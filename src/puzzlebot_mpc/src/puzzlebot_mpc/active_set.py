@@ -26,9 +26,13 @@ multipliers and the violations (the primal-dual active-set method,
 Hintermueller, Ito and Kunisch, SIAM J. Optim. 13(3), 2002): a row leaves
 when its multiplier is negative, enters when it is violated; a variable
 leaves its bound when the bound's multiplier is negative, is put on a bound
-it violates. When the working set repeats, the KKT conditions hold to the
-tolerances below: the result is the QP's solution, not an approximation of
-it. Started from the previous step's working set, a real-time iteration's
+it violates. After FULL_STEPS iterations without convergence it changes
+only the most violated indices (half as many each iteration, down to one; a
+working set seen before drops it to one at once), which converges from most
+starts, slowly; of two ``exclusive`` rows (a butterfly cone's two halves:
+both hold only at its vertex) one enters at a time. When no index changes,
+the KKT conditions hold to the tolerances below: the result is the QP's
+solution, not an approximation of it. Started from the previous step's working set, a real-time iteration's
 QP usually needs one factorization (Clarabel's interior point takes 11-12);
 the method is not guaranteed to converge from any start, so the caller
 falls back to an interior-point solver after ``max_iter`` iterations.

@@ -25,10 +25,14 @@ per-solve overhead), large ones alone (``decompose``), optionally on
 
 Solvers (``settings.solver``):
 
-- ``clarabel`` (default): real-time iteration. Each step linearises the
-  problem at the previous solution shifted by one stage (Gauss-Newton
-  Hessian, linearised dynamics and constraints) and solves that sparse QP
-  with Clarabel's interior-point method. ``sqp_iterations`` QPs per step
+- ``active_set`` (default) and ``clarabel``: real-time iteration. Each step
+  linearises the problem at the previous solution shifted by one stage
+  (Gauss-Newton Hessian, linearised dynamics and constraints) and solves
+  that sparse QP: ``active_set`` by the primal-dual active-set method
+  (puzzlebot_mpc/active_set.py) warm-started with the working set of the
+  last solution, one LDL' factorization per working set (Clarabel on a
+  structure's first QP and on a QP it does not finish); ``clarabel`` by
+  Clarabel's interior-point method. ``sqp_iterations`` QPs per step
   (1 = classic RTI), ``sqp_iterations_cold`` after a cold start.
   The butterfly set is two cones; each stage uses the cone of the previous
   plan's direction of travel. A robot at rest that must move (a goal, an

@@ -23,6 +23,10 @@ q = 2 J'(r - J zbar) + lin; A z <= b from the linearised rows
 Pair slots that are neither active nor coupled carry zero weights and zero
 rows (``0 - s <= 0``): a pair that changes status, or a robot that joins or
 leaves a slot's pair, changes numbers, never the structure.
+
+Clarabel takes the QP as assembled (``assemble``); the active-set solver
+(active_set.py) takes it with its single-variable rows as bounds
+(``bounded``: lb <= z <= ub and the general rows).
 """
 
 import math
@@ -317,10 +321,9 @@ class QPStructure:
         self.G_indices = newrow[self.A_indices[keep]].astype(np.int64)
         self.G_indptr = np.searchsorted(cols[keep], np.arange(self.lay.nz + 1)).astype(np.int64)
         self.m_general = len(self.general)
-        rows_of_entry = self.A_indices
         srows = np.flatnonzero(single)
         entry_of_row = np.empty(self.m, np.int64)
-        entry_of_row[rows_of_entry] = np.arange(self.nA)       # single rows have exactly one entry
+        entry_of_row[self.A_indices] = np.arange(self.nA)      # single rows have exactly one entry
         self.bound_rows = srows
         self.bound_entry = entry_of_row[srows]
         self.bound_var = cols[self.bound_entry]
@@ -486,7 +489,7 @@ class QPStructure:
             if r.shape[0] == 0:
                 pvals.append(np.zeros(0))
                 continue
-            pvals.append((2.0 * np.matmul(J.transpose(0, 2, 1), J)[:, a, b]).ravel())    # 9x the einsum at 128 robots
+            pvals.append((2.0 * np.matmul(J.transpose(0, 2, 1), J)[:, a, b]).ravel())
             t = r - _matvec(J, zbar[V])
             q += np.bincount(V.ravel(), (2.0 * np.matmul(t[:, None, :], J)[:, 0, :]).ravel(), nz)
         pvals.append(self.reg)
