@@ -45,6 +45,12 @@ iteration).
 import numpy as np
 import scipy.sparse as sp
 
+try:
+    import qdldl
+except ImportError as e:       # an environment set up before the dependency: say what to do
+    raise ImportError("puzzlebot_mpc.active_set needs the qdldl package (requirements.txt; scripts/setup.sh "
+                      "installs it), or set mpc.solver: clarabel") from e
+
 DELTA = 1e-9          # regularisation of the KKT diagonal (primal +, dual -); refinement removes its effect
 REFINE_MAX = 4        # iterative refinement steps at most per factorization
 REFINE_TOL = 1e-13    # ... until the gradient's and the rows' residuals are below this, relative to
@@ -159,8 +165,6 @@ class ActiveSetQP:
             self.AT.data = self.A.data
 
     def _factor(self, Kx):
-        import qdldl
-
         self.K.data = Kx
         if self.factor is None:
             self.factor = qdldl.Solver(self.K, upper=True)
