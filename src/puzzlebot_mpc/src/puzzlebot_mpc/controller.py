@@ -225,8 +225,7 @@ class _ClarabelQP:
 class _ActiveSetQP:
     """One QP of the real-time iteration solved by the primal-dual active-set method
     (puzzlebot_mpc/active_set.py) on its KKT sparsity, started from the working set of the solution the
-    last step chose; the butterfly rows of a robot and stage whose cone changed start outside it.
-    Clarabel solves the QP when there is no such working set yet (its first QP: a cold start from rest
+    last step chose. Clarabel solves the QP when there is no such working set yet (its first QP: a cold start from rest
     changes too many rows at once) and when the active set does not converge within
     ``active_set_iterations`` working sets (status "... (Clarabel fallback)"); the rows whose dual
     exceeds their slack in its solution are the next working set."""
@@ -242,8 +241,8 @@ class _ActiveSetQP:
             self.solver.exclusive = qs.bf_rows.reshape(-1, 2)
         self.fallback = None
         self.fallbacks = 0
-        self.working = None          # (WorkingSet, butterfly cones (n, H+1)) the next QP starts from
-        self._tried = []             # (z, working set, cones) of this step's solves, for keep()
+        self.working = None          # the WorkingSet the next QP starts from
+        self._tried = []             # (z, working set) of this step's solves, for keep()
         self.solver_s = 0.0
 
     def solve(self, settings, zbar, d):
@@ -254,16 +253,11 @@ class _ActiveSetQP:
         Ag, bg, lb, ub = self.qs.bounded(Ax, b)
         res = None
         if self.working is not None:         # cold (no solution yet): the interior point gives the first one
-            ws, cones = self.working
-            changed = (cones != d.bsign).T                    # (H+1, n)
-            if changed.any():
-                ws = ws.copy()
-                ws.rows[self.qs.bf_rows[changed].reshape(-1)] = False
-            res = self.solver.solve(Px, q, Ag, bg, lb, ub, ws)
+            res = self.solver.solve(Px, q, Ag, bg, lb, ub, self.working)
             self.solver_s += time.perf_counter() - t0
             if res.solved:
                 z = self.qs.from_solver(res.z)
-                self._tried.append((z, res.working, d.bsign.copy()))
+                self._tried.append((z, res.working))
                 return z, "Solved", res.iterations, res.obj
             self.fallbacks += 1
         # not converged: the interior point solves the same QP, its solution gives the working set
@@ -277,7 +271,7 @@ class _ActiveSetQP:
             zs[self.qs.slack_solver] = np.maximum(zs[self.qs.slack_solver], 0.0)
             z = self.qs.from_solver(zs)
             obj = self.solver.objective(Px, q, zs)     # comparable with the active set's (lobe search)
-            self._tried.append((z, self._working_set_of(self.fallback.last, Ax), d.bsign.copy()))
+            self._tried.append((z, self._working_set_of(self.fallback.last, Ax)))
         if res is None:
             return z, status, it, obj
         return z, status + " (Clarabel fallback)", res.iterations + it, obj
@@ -297,9 +291,9 @@ class _ActiveSetQP:
 
     def keep(self, z):
         """The step chose the solution ``z`` (None: the step failed): its working set starts the next QP."""
-        for zt, ws, cones in self._tried:
+        for zt, ws in self._tried:
             if zt is z:
-                self.working = (ws, cones)
+                self.working = ws
         self._tried = []
 
     def cost(self, z, d):
