@@ -8,14 +8,14 @@ import pytest
 import scipy.sparse as sp
 
 from puzzlebot_common.model import unicycle_arc
-from puzzlebot_mpc.active_set import AT_LOWER, AT_UPPER, FREE, ActiveSetQP
+from puzzlebot_mpc.active_set import AT_LOWER, AT_UPPER, ActiveSetQP
 from puzzlebot_mpc import controller
 from puzzlebot_mpc.controller import MultiRobotMPC
 from puzzlebot_mpc.ocp import Structure
-from puzzlebot_mpc.qp import QPStructure, pack
+from puzzlebot_mpc.qp import pack
 from puzzlebot_mpc.settings import MPCSettings
 
-from test_qp import CASES, anchor_pair, chain_scene, random_case
+from test_qp import CASES, chain_scene, random_case
 
 clarabel = pytest.importorskip("clarabel")
 
@@ -200,8 +200,9 @@ def test_closed_loop_steps_equal_clarabel():
 
 
 def test_falls_back_to_clarabel_with_the_same_result():
-    """One working set allowed: a cold step that needs more is solved by Clarabel (status says so), with
-    Clarabel's plan; its solution's working set then starts the next QPs."""
+    """One working set allowed: the cold step's later QPs (its first is Clarabel's anyway) need more and
+    fall back to Clarabel (the status says so), with Clarabel's plan; Clarabel's working sets then start
+    the next QPs, some of which one working set solves."""
     s = MPCSettings(horizon=6, constraint_horizon=3, qp_tolerance=1e-9)
     x0, obj = chain_scene()
     obj.velocity[0] = (0.2, 0.0)                          # beyond v_max: the velocity bounds are active
