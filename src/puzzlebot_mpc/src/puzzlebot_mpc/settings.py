@@ -45,7 +45,10 @@ class MPCSettings:
     w_slack_butterfly: float = 1.0e5  # s/rad: exact-penalty weight of a butterfly-set violation
     slack_regularisation: float = 1.0e-2  # small quadratic weight on slacks (strictly convex QP)
     pip_margin: float = 0.001        # m: coupling polygons are tightened by this much in the constraint
-    solver: str = "clarabel"         # "clarabel" (real-time iteration, sparse QP) or "ipopt" (full NLP)
+    solver: str = "active_set"       # real-time iteration, one sparse QP per step, solved by "active_set" (the
+                                     # primal-dual active-set method, warm-started) or "clarabel" (interior
+                                     # point); or "ipopt" (the full NLP, the reference)
+    active_set_iterations: int = 10  # working sets tried per QP by active_set before Clarabel solves it
     sqp_iterations: int = 1          # QPs per step when warm (1 = real-time iteration)
     sqp_iterations_cold: int = 3     # QPs per step after a cold start
     decompose: bool = True           # independent subproblems (robots neither coupled nor pairing with each
@@ -112,7 +115,8 @@ class MPCSettings:
         """Range and cross-field checks; raise ConfigError."""
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
-                                "sqp_iterations_cold", "solver_threads", "pair_epsilon", "pair_lost_margin",
+                                "sqp_iterations_cold", "solver_threads", "active_set_iterations", "pair_epsilon",
+                                "pair_lost_margin",
                                 "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
@@ -132,8 +136,9 @@ class MPCSettings:
         if self.constraint_horizon > self.horizon:
             raise ConfigError("%s.constraint_horizon (%d) must be <= horizon (%d)"
                               % (where, self.constraint_horizon, self.horizon))
-        if self.solver not in ("clarabel", "ipopt"):
-            raise ConfigError("%s.solver: unknown solver %r; known: clarabel, ipopt" % (where, self.solver))
+        if self.solver not in ("active_set", "clarabel", "ipopt"):
+            raise ConfigError("%s.solver: unknown solver %r; known: active_set, clarabel, ipopt"
+                              % (where, self.solver))
         if self.decouple_creep > self.v_max or self.decouple_settle_speed > self.v_max:
             raise ConfigError("%s: decouple_creep and decouple_settle_speed must be <= v_max (%.3f m/s)"
                               % (where, self.v_max))
