@@ -7,6 +7,10 @@ node and tool builds them with these helpers instead of formatting strings.
 #: Fixed world frame of the motion-capture system and of the simulation.
 WORLD_FRAME = "world"
 
+#: Frame at the centre of the robots (no rotation from WORLD_FRAME): the shipped rviz view follows it
+#: (puzzlebot_bringup markers node).
+VIEW_FRAME = "puzzlebot/view"
+
 #: Namespace of stack-wide topics, services and parameters.
 STACK_NS = "/puzzlebot"
 
