@@ -20,6 +20,8 @@ PHYSICAL_PAIRS_TOPIC = STACK_NS + "/sim/physical_pairs"
 SOLVER_STATS_TOPIC = STACK_NS + "/mpc/solver_stats"
 BEHAVIOR_STATUS_TOPIC = STACK_NS + "/mpc/behavior_status"
 SET_BEHAVIOR_SERVICE = STACK_NS + "/mpc/set_behavior"
+#: puzzlebot_msgs/Behavior action of the MPC node: SET_BEHAVIOR_SERVICE with feedback, result and cancel.
+BEHAVIOR_ACTION = STACK_NS + "/mpc/behavior"
 PREDICTED_TRAJECTORIES_TOPIC = STACK_NS + "/mpc/predicted_trajectories"
 MPC_MARKERS_TOPIC = STACK_NS + "/mpc/markers"
 #: puzzlebot_msgs/BehaviorObjectives: goals and target slots of the running behaviour (MPC node).

@@ -29,7 +29,7 @@ import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_common.pose_gate import PoseGate, PoseGateParams, Verdict
-from puzzlebot_mpc.behaviors import FAILED, RUNNING, BehaviorError, BehaviorManager
+from puzzlebot_mpc.behaviors import FAILED, RUNNING, STOP, BehaviorError, BehaviorManager, BehaviorRequest
 from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
 from puzzlebot_common.model import NX
@@ -160,6 +160,20 @@ class ControlLoop:
     def pending(self):
         """Ids of the requests waiting to start, in order."""
         return [request_id for request_id, _ in self._pending]
+
+    def cancel(self, request_id, now):
+        """Cancel request ``request_id`` at ``now`` [s]: a queued one leaves the queue ("queued"); the
+        running one is replaced by ``stop`` ("running": every robot comes to rest, the coupled pairs
+        stay held, the requests queued behind it are dropped, as for any request that starts at
+        once). None: it is neither queued nor running (ended, or unknown)."""
+        for k, (rid, _) in enumerate(self._pending):
+            if rid == request_id:
+                del self._pending[k]
+                return "queued"
+        if self.behaviors.request_id == request_id and self.behaviors.state == RUNNING:
+            self.request(BehaviorRequest(STOP), now)
+            return "running"
+        return None
 
     def _start_due(self, now, poses):
         """Start the queued requests that are due (see request)."""
