@@ -44,6 +44,7 @@ def test_sim_launch_defaults_and_options():
     c = load_launch("sim")
     assert node_names(c) == ["diagnostic_aggregator", "mpc", "robot_state_publisher", "scenario_runner", "sim"]
     assert c.params["/diagnostic_aggregator/analyzers/sim/startswith"].value == ["puzzlebot_sim"]
+    assert "/diagnostic_aggregator/analyzers/driver/path" not in c.params
     assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2", "pz3", "pz4"]
     assert c.params["/sim/sim/world"].value == "flat" and c.params["/use_sim_time"].value is True
     assert c.params["/sim/sim/mocap_position_std"].value == 0.0003 and c.params["/sim/sim/seed"].value == 0
@@ -90,6 +91,8 @@ def test_lab_launch_emulate_port_and_record():
     assert node_names(emu) == ["diagnostic_aggregator", "driver", "emulator", "mpc", "record", "robot_state_publisher"]
     joints = {j.get("name"): j.get("type") for j in ET.fromstring(lab.params["/robot_description"].value).iter("joint")}
     assert joints["p21/anchor_joint"] == "fixed"           # nothing measures a lab anchor: drawn at rest
+    groups = {k.split("/")[3] for k in lab.params if k.startswith("/diagnostic_aggregator/analyzers/")}
+    assert groups == {"mpc", "driver"}                     # no simulation group in the lab (it would be stale)
     assert lab.params["/driver/driver/port"].value == 9123
     assert emu.params["/emulator/emulator/port"].value == 0 and emu.params["/driver/bound_port"].value == 0
     assert emu.params["/use_sim_time"].value is False
