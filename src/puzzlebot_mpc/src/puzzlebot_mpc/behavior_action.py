@@ -8,7 +8,9 @@ step to the ROS-free goals.GoalBook and hands its events to :meth:`apply`:
 feedback (state, message, progress, errors, pairs) while a goal waits or
 runs, then its result: SUCCEEDED, ABORTED (failed, or dropped from the
 queue), PREEMPTED (replaced by a request that started at once, or
-cancelled while running), RECALLED (cancelled while queued).
+cancelled; the result's outcome says which, and its start time 0 that it
+never ran). Goals are accepted at once, queued ones too (ACTIVE while they
+wait), so none ends RECALLED.
 
 Cancel (:meth:`on_cancel`): a queued goal leaves the queue; a running one
 is replaced by ``stop`` (every robot comes to rest, coupled pairs stay
@@ -45,7 +47,7 @@ class BehaviorActionServer:
         req = request_from_srv(handle.get_goal())
 
         def accept(request_id, queued):           # under the node's lock, before any step can report it
-            self.book.add(request_id, handle, req.robots, queued)
+            self.book.add(request_id, handle, req.robots, queued, key=handle.get_goal_id().id)
             handle.set_accepted("request %d" % request_id)
             handle.publish_feedback(BehaviorFeedback(
                 request_id=request_id, state=BehaviorStatus.IDLE if queued else BehaviorStatus.RUNNING,
@@ -56,7 +58,7 @@ class BehaviorActionServer:
             handle.set_rejected(result_msg(outcome="refused", message=str(e)), str(e))
 
     def on_cancel(self, handle):
-        request_id = self.book.request_of(handle)
+        request_id = self.book.request_of(handle.get_goal_id().id)     # actionlib wraps each call anew
         if request_id is None:
             return
 

@@ -63,9 +63,11 @@ class GoalEvent:
 @dataclass
 class _Goal:
     handle: object
+    key: object                     # what identifies the goal to the caller (actionlib: its goal id)
     robots: List[str]
     queued: bool                    # it was queued when accepted (queue or a later start_time)
     started: float = None
+    last: tuple = None              # (robots, errors, progress) of the last step it was the current request
     finish: tuple = None            # (kind, outcome, message) forced by finish()
 
 
@@ -90,17 +92,18 @@ class GoalBook:
     def __len__(self):
         return len(self._goals)
 
-    def add(self, request_id, handle, robots, queued):
-        """An accepted goal: request ``request_id`` of ``robots`` (empty: all), ``queued`` or started at once."""
-        self._goals[request_id] = _Goal(handle, list(robots), queued)
+    def add(self, request_id, handle, robots, queued, key=None):
+        """An accepted goal: request ``request_id`` of ``robots`` (empty: all), ``queued`` or started at once;
+        ``key`` identifies it for request_of (default: the handle)."""
+        self._goals[request_id] = _Goal(handle, handle if key is None else key, list(robots), queued)
 
     def handle(self, request_id):
         goal = self._goals.get(request_id)
         return goal.handle if goal is not None else None
 
-    def request_of(self, handle):
-        """The request id of goal ``handle`` (None: not a goal of this book)."""
-        return next((rid for rid, g in self._goals.items() if g.handle is handle), None)
+    def request_of(self, key):
+        """The request id of the goal with ``key`` (None: not a goal of this book, or ended)."""
+        return next((rid for rid, g in self._goals.items() if g.key == key), None)
 
     def finish(self, request_id, kind, outcome, message):
         """End goal ``request_id`` at the next step with ``kind`` (ABORTED or CANCELED) and ``outcome``."""
@@ -124,8 +127,10 @@ class GoalBook:
                               started=g.started, now=now)
             if current:
                 event.state, event.message = status.state, status.message
-                event.robots, event.errors, event.progress = list(status.robots), list(status.errors), status.progress
-                event.pairs = involving(pairs, status.robots)
+                g.last = (list(status.robots), list(status.errors), status.progress)
+            if g.last is not None:      # a goal that ended while another runs: what it had last
+                event.robots, event.errors, event.progress = g.last
+                event.pairs = involving(pairs, event.robots)
             if g.finish is not None:
                 event.kind, event.outcome, event.message = g.finish
                 event.state = FAILED
