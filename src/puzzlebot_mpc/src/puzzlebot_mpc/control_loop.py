@@ -192,6 +192,22 @@ class ControlLoop:
             except BehaviorError as e:
                 self.behaviors.refuse(request_id, req, "refused when due: %s" % e)
 
+    def retune(self, settings, mpc=None):
+        """Use ``settings`` (MPCSettings with the same dt, horizon and solver: puzzlebot_mpc.tuning) from
+        the next step, and ``mpc``: a MultiRobotMPC built for them (see :meth:`build_mpc`) when the change
+        reaches the MPC's problem; None keeps the current one (a change the behaviours read every step)."""
+        self.settings = settings
+        self.behaviors.set_settings(settings)
+        if mpc is not None:
+            self.mpc = mpc
+
+    def build_mpc(self, settings, keys):
+        """A MultiRobotMPC for ``settings``, with the structure of pair slots ``keys`` (pair_keys()) built;
+        slow (CasADi builds the problem): call it outside the node's lock, then :meth:`retune`."""
+        mpc = MultiRobotMPC(settings, len(self.names)).setup()
+        mpc.prepare(keys)
+        return mpc
+
     def pair_keys(self):
         """The current pair slots as robot index tuples (the MPC structure's key)."""
         index = {n: i for i, n in enumerate(self.names)}

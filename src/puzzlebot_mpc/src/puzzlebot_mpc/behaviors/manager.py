@@ -88,6 +88,14 @@ class BehaviorManager:
         self._state, self._message = FAILED, message
         self._rest()
 
+    def set_settings(self, settings):
+        """Use ``settings`` (MPCSettings, live tuning: puzzlebot_mpc.tuning) for new requests and the running
+        behaviour from now on."""
+        self.settings = settings
+        self._ctx.settings = settings
+        if self._behavior is not None:
+            self._behavior.settings = settings
+
     def note(self, text):
         """Append ``text`` to the current status message (e.g. queued requests dropped)."""
         self._message += text
