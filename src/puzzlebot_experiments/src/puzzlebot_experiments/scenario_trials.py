@@ -134,6 +134,17 @@ def format_table(summary):
     return "\n".join(rows)
 
 
+def failure_text(reason, width=95):
+    """A step's failure reason for the timeline: the behaviour's "timeout after 90.00 s; not coupled: ..."
+    as "timeout (90 s): not coupled: ...", whole words, at most ``width`` characters."""
+    import re
+
+    text = re.sub(r"^timeout after ([0-9.]+) s; ", lambda m: "timeout (%g s): " % float(m.group(1)), str(reason))
+    if len(text) > width:
+        text = text[:width].rsplit(" ", 1)[0].rstrip(",;:") + " ..."
+    return text
+
+
 def plot_trials(records, scenario_steps, path, title=""):
     """PNG timeline: one row per trial, one bar per step it reached (length: simulated seconds), green
     when the step succeeded and Bullet agreed, red when it did not, with the reason next to it (the
@@ -154,8 +165,8 @@ def plot_trials(records, scenario_steps, path, title=""):
                     hatch=hatches[k % len(hatches)], edgecolor="white", linewidth=0.5)
             t += st["sim_seconds"]
             if not st["ok"]:
-                why = st["problems"][0] if st["problems"] else st.get("message", st["state"])[:60]
-                ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3")
+                why = failure_text(st["problems"][0] if st["problems"] else st.get("message", st["state"]))
+                ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3", clip_on=False)
         t_max = max(t_max, t)
     handles = [Patch(facecolor="0.6", hatch=hatches[k % len(hatches)], edgecolor="white",
                      label="%d. %s" % (k + 1, step.describe())) for k, step in enumerate(scenario_steps)]
