@@ -11,7 +11,7 @@ Namespaces (one owner: this module):
 | --- | --- | --- |
 | ``bodies`` | body boxes, coloured robot / pilot | ``<robot>/base_link`` |
 | ``fronts`` | a line across the front face (the opening) | ``<robot>/base_link`` |
-| ``labels`` | robot names | ``<robot>/base_link`` |
+| ``labels`` | robot names, on the body's rear half | ``<robot>/base_link`` |
 | ``anchors`` | anchor bar, barbs, head: the simulated anchor body in ``<robot>/anchor`` (sim), else the nominal anchor C_a -> H_a | ``<robot>/anchor`` or ``base_link`` |
 | ``polygons`` | coupling polygon of each MPC connection pair (front triangle / knob region of robot_j), filled with the pair's status colour | ``<robot_j>/base_link`` |
 | ``pairs`` | line from the pair's head (anchor head H_a or knob) to robot_j's connection point, status colour | world |
@@ -275,6 +275,7 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
         m.points = [_pt(L / 2, -geometry.opening_width, top), _pt(L / 2, geometry.opening_width, top)]
         add(m)
         m = _marker("labels", k, Marker.TEXT_VIEW_FACING, base, style.label, (0, 0, style.label_height), locked=True)
+        m.pose.position.x = -L / 4          # on the rear half: the predicted path leaves from the centre forward
         m.pose.position.z = h + 2 * style.label_height
         m.text = r.name + (" (pilot)" if r.pilot else "")
         add(m)

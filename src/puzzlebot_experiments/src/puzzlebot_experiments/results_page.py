@@ -103,6 +103,28 @@ def bench_table(bench):
     return "\n".join(rows)
 
 
+def bench_summary(bench, period_ms=100.0, paper_robots=8, horizon=10):
+    """The prose figures beside the MPC time table, from the same JSON (never typed by hand): the
+    paper's largest size and the largest one measured at Hm = ``horizon``, as shares of the control
+    period, and the failures of every configuration."""
+    res = bench.get("results", [])
+    cell = {(r["robots"], r["horizon"]): r for r in res}
+    fails = sum(r["failures"] for r in res)
+    largest = max((r["robots"] for r in res if r["horizon"] == horizon), default=None)
+    parts = []
+    for n, what in ((paper_robots, "At the paper's largest size, %d robots with Hm = %d," % (paper_robots, horizon)),
+                    (largest, "With %s robots," % largest)):
+        r = cell.get((n, horizon))
+        if r is not None:
+            parts.append("%s one step takes %.1f ms median (p95 %.1f ms, max %.1f ms): %.0f %% of the %.0f ms "
+                         "control period." % (what, r["median_ms"], r["p95_ms"], r["max_ms"],
+                                              100 * r["median_ms"] / period_ms, period_ms))
+    parts.append("%s (%d configurations, %d steps each)." % (
+        "Every configuration solved every step" if fails == 0 else "%d failed steps in all" % fails, len(res),
+        bench.get("steps", 0)))
+    return "\n".join(parts)
+
+
 def force_table(summary):
     return "\n".join([
         "| | paper (measured rig) | this simulation |", "|---|---|---|",

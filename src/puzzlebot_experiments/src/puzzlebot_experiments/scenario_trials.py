@@ -20,7 +20,7 @@ A trial succeeds when every step does; it stops at the first failed step.
 import numpy as np
 
 from puzzlebot_common.robots import parse_robot_list
-from puzzlebot_mpc.behaviors import STATE_NAMES, SUCCEEDED, BehaviorRequest
+from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
 from puzzlebot_sim.coupling import HEAD_ALIGNED, HEAD_INSERTED
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
@@ -81,7 +81,11 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
         for step in sc.steps:
             req = request_of(step)
             limit = (step.timeout or 60.0) + SETTLE
-            state, message, elapsed = cl.run_behavior(req, limit)
+            t0 = cl.time
+            try:
+                state, message, elapsed = cl.run_behavior(req, limit)
+            except RuntimeError as e:          # a pose the pose gate rejects (a robot fell off a stage): the
+                state, message, elapsed = FAILED, "pose rejected: %s" % e, cl.time - t0    # trial fails there
             coupled = sorted(cl.loop.pairs.coupled)
             problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
             step_ok = state == SUCCEEDED and not problems
