@@ -83,7 +83,6 @@ class Runner:
             rospy.Subscriber(r.vicon_topic, TransformStamped, self._on_pose, callback_args=r.name, queue_size=20)
         self.client = None
         self.goals = {}         # request id -> actionlib ClientGoalHandle of its goal
-        self.feedback = {}      # request id -> its latest BehaviorFeedback
 
     # ------------------------------------------------------------ callbacks
     def _on_status(self, msg):
@@ -185,8 +184,6 @@ class Runner:
 
         def on_feedback(handle, feedback):
             box.setdefault("id", feedback.request_id)
-            with self.lock:
-                self.feedback[feedback.request_id] = feedback
         handle = self.client.send_goal(goal, feedback_cb=on_feedback)
         end = time.monotonic() + timeout
         while "id" not in box and not rospy.is_shutdown() and time.monotonic() < end:

@@ -6,7 +6,8 @@
 (or dynamic_reconfigure.client.Client("/mpc/tuning").update_configuration({...}); no rqt on Debian 12).
 A change is validated as the YAML is; refused, nothing changes and the answer's ``refused`` says why;
 applied, it is used from the next control step (a weight or a limit: after the MPC's problem is built
-anew in this thread; the time it took is logged).
+anew in this thread; the time it took is logged). It starts at the node's settings (the YAML), whatever
+a previous run left under ~tuning on the same parameter server.
 """
 
 import time
@@ -25,6 +26,8 @@ class TuningServer:
         self.node = node
         self.where = rospy.resolve_name("~" + namespace)
         self.rebuild_ms = []          # wall time [ms] of each rebuild (tests, the log)
+        if rospy.has_param(self.where):   # a previous run's live values (same roscore): start from the YAML
+            rospy.delete_param(self.where)
         self.server = Server(config_type(node.loop.settings), self.on_config, namespace=namespace)
 
     def on_config(self, config, level):
