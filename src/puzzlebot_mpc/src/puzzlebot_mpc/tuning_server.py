@@ -1,7 +1,7 @@
 """The MPC node's dynamic_reconfigure server (ROS side of puzzlebot_mpc.tuning): ``~tuning``.
 
-    /usr/lib/dynamic_reconfigure/dynparam set /mpc/tuning w_goal_terminal 20000     # Debian's dynparam
-    /usr/lib/dynamic_reconfigure/dynparam get /mpc/tuning
+    rosrun puzzlebot_mpc tune w_goal_terminal=20000       # nodes/tune (Debian's dynparam does not run)
+    rosrun puzzlebot_mpc tune
 
 (or dynamic_reconfigure.client.Client("/mpc/tuning").update_configuration({...}); no rqt on Debian 12).
 A change is validated as the YAML is; refused, nothing changes and the answer's ``refused`` says why;
