@@ -111,6 +111,7 @@ def _run(args, executor, out):
             bench = json.load(f)
         page.bench_figure(bench, os.path.join(args.img, "results_mpc_time.png"))
         blocks["bench_table"] = page.bench_table(bench)
+        blocks["bench_summary"] = page.bench_summary(bench)
     else:
         out.write("experiments: no benchmark file %s (make bench writes it): MPC table not updated\n" % args.bench)
 

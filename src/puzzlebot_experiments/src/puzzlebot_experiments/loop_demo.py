@@ -440,7 +440,8 @@ COLORS = {PLAIN: "tab:red", IDENTIFIED: "tab:blue", TRUE: "tab:green", CLEAN: "0
 
 def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
     """(a) true paths and (b) distance to goal of one robot under each controller; (c) summary bars;
-    (d) time to couple of every coupling trial."""
+    (d) time to couple of every coupling trial. Two panels a row (readable at a page's width); the
+    injected and identified models written out below the panels, one line per robot."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -450,7 +451,10 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
     shown = [(k, lab) for k, lab in labels if k in COLORS and runs.get(k)]
     first = {k: runs[k][0] for k, _ in shown}
     name = sorted(first[PLAIN]["truth"])[0]
-    fig, ax = plt.subplots(1, 4 if trials else 3, figsize=(20 if trials else 16, 4.8))
+    fig, grid = plt.subplots(2, 2, figsize=(12, 9.5))
+    ax = grid.ravel()
+    if not trials:
+        ax[3].axis("off")
     goals = np.asarray(first[PLAIN]["goals"][name])
     style = {PLAIN: ("-", 1.2), TRUE: ("-", 2.2), IDENTIFIED: ("--", 1.2)}
     for k in (PLAIN, TRUE, IDENTIFIED):            # the identified model dashed over the true one
@@ -486,7 +490,7 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
                   color=COLORS[k], label=lab)
     ax[2].axhline(1e3 * demo.reach_tolerance, color="k", ls=":", lw=0.8)
     ax[2].set_xticks(x)
-    ax[2].set_xticklabels([label for _, label in keys], fontsize=8)
+    ax[2].set_xticklabels([label for _, label in keys], fontsize=9)
     ax[2].set_title("(c) seeds %s: every robot and goal" % ", ".join(str(r["seed"]) for r in runs[PLAIN]),
                     fontsize=10)
     ax[2].legend(fontsize=8)
@@ -500,13 +504,14 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
             ax[3].plot(x[~fail], tt[~fail], "o", ms=4, color=COLORS[k], alpha=0.7)
             ax[3].plot(x[fail], np.full(fail.sum(), demo.couple_timeout), "x", ms=7, color=COLORS[k])
         ax[3].set_xticks(range(len(keys)))
-        ax[3].set_xticklabels([dict(shown)[k].replace(" (", "\n(") for k in keys], fontsize=7)
+        ax[3].set_xticklabels([dict(shown)[k].replace(" (", "\n(") for k in keys], fontsize=9)
         ax[3].set_ylabel("time to couple [s] (x: not coupled and seated)")
         ax[3].set_title("(d) two robots couple with their anchors: %d trials each" % len(trials[PLAIN]),
                         fontsize=10)
-    fig.suptitle("injected: %s\nidentified: %s" % (describe_model(cfg.true_model), describe_model(identified_model)),
-                 fontsize=9)
-    fig.tight_layout()
+    models = ["injected: " + line for line in describe_model(cfg.true_model).split(" | ")]
+    models += ["identified: " + line for line in describe_model(identified_model).split(" | ")]
+    fig.tight_layout(rect=(0, 0.03 * len(models) / 2 + 0.02, 1, 1))
+    fig.text(0.01, 0.005, "\n".join(models), fontsize=8, va="bottom", family="monospace")
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

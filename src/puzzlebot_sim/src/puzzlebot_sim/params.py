@@ -331,6 +331,8 @@ class SimParams:
     physics_rate: int = 200          # Hz, Bullet fixed step, a multiple of pose_rate (accuracy vs speed: docs/sim.md)
     pose_rate: int = MOCAP_RATE      # Hz, vicon topics, tf and /clock (the lab's Vicon rate)
     pairs_rate: int = 10             # Hz, /puzzlebot/sim/physical_pairs; pose_rate is a multiple of it
+    joint_state_rate: int = 10       # Hz, /joint_states (wheels, anchor neck and barbs; robot_state_publisher)
+    diagnostics_period: float = 1.0  # s (wall) between /diagnostics messages (real-time factor, overruns)
     real_time_factor: float = 0.0    # 1 = wall-clock pace, 0 = as fast as possible
     cmd_timeout: float = 0.5         # s (sim time): a robot without a fresh cmd_vel stops
     sync_topic: str = ""             # lockstep with a controller: at each sync_period wait for a stamped message
@@ -361,7 +363,8 @@ class SimParams:
         return from_mapping(cls, data, where)
 
     def check(self, where="sim"):
-        require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "cmd_timeout", "sync_period",
+        require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "joint_state_rate", "diagnostics_period",
+                                "cmd_timeout", "sync_period",
                                 "sync_timeout", "sync_startup_timeout", "sync_cmd_timeout", "solver_iterations", "erp",
                                 "tilted_solver_iterations", "tilt_threshold"], where)
         if self.real_time_factor < 0:
@@ -372,6 +375,9 @@ class SimParams:
         if self.pose_rate % self.pairs_rate:
             raise ConfigError("%s: pose_rate (%d Hz) must be an integer multiple of pairs_rate (%d Hz)"
                               % (where, self.pose_rate, self.pairs_rate))
+        if self.pose_rate % self.joint_state_rate:
+            raise ConfigError("%s: pose_rate (%d Hz) must be an integer multiple of joint_state_rate (%d Hz)"
+                              % (where, self.pose_rate, self.joint_state_rate))
         ticks = self.sync_period * self.pose_rate
         if abs(ticks - round(ticks)) > 1e-6:
             raise ConfigError("%s: sync_period (%g s) must be a whole number of pose periods (1/%d s)"

@@ -471,12 +471,29 @@ class SimWorld(BulletSession):
             return None
         return pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
 
+    def anchor_pose_in_base(self, name):
+        """(position xyz, quaternion xyzw) of the robot's anchor base in its base_link, or None without
+        anchors (the sim node's tf <robot>/base_link -> <robot>/anchor)."""
+        frozen = self._rest.frozen(name)
+        if frozen is not None:
+            return frozen.base
+        pose = self.anchor_pose(name)
+        if pose is None:
+            return None
+        inverse = pb.invertTransform(*self.pose(name), physicsClientId=self.client)
+        return pb.multiplyTransforms(*inverse, *pose, physicsClientId=self.client)
+
     def anchor_pose2d(self, name):
         pose = self.anchor_pose(name)
         if pose is None:
             return None
         pos, orn = pose
         return (pos[0], pos[1], yaw_from_quaternion(*orn))
+
+    def wheel_angles(self, name):
+        """Wheel joint angles [rad] of the robot, in urdf.WHEEL_JOINTS order (pilots: PILOT_WHEEL_JOINTS)."""
+        robot = self.robots[name]
+        return tuple(s[0] for s in pb.getJointStates(robot.body, robot.wheels, physicsClientId=self.client))
 
     def anchor_joints(self, name):
         """(neck, left barb, right barb) joint angles [rad]; barb 0 = rest, > 0 flared, < 0 folded."""
