@@ -14,10 +14,19 @@ what="${1:-all}"
 APT_PACKAGES=(
   catkin python3-catkin-pkg ros-message-generation ros-message-runtime librostest-dev
   python3-rospy python3-roslaunch python3-rostest python3-rosbag python3-rosnode python3-rostopic
-  python3-rosparam python3-rosservice python3-rosmsg python3-genpy python3-gencpp python3-genmsg
+  python3-rosparam python3-rosservice python3-rosmsg python3-genpy python3-gencpp python3-genmsg python3-rosgraph
+  python3-rospkg python3-yaml python3-dateutil
   python3-tf2-ros python3-geometry-msgs python3-std-msgs python3-sensor-msgs python3-visualization-msgs
-  python3-diagnostic-msgs python3-rosgraph-msgs ros-geometry-msgs ros-std-msgs ros-visualization-msgs
-  ros-diagnostic-msgs rosout rosbash rospack-tools rviz xvfb x11-apps python3-venv python3-dev
+  python3-diagnostic-msgs python3-rosgraph-msgs python3-tf2-msgs ros-geometry-msgs ros-std-msgs ros-visualization-msgs
+  ros-diagnostic-msgs libstd-msgs-dev libgeometry-msgs-dev libdiagnostic-msgs-dev libtf2-ros-dev
+  rosout rosbash rospack-tools rviz xvfb x11-apps python3-venv python3-dev
+  # the behaviour action (python3-actionlib; the -msgs packages build it), live tuning, the robot model
+  python3-actionlib libactionlib-dev python3-actionlib-msgs ros-actionlib-msgs libactionlib-msgs-dev
+  python3-dynamic-reconfigure ros-robot-state-publisher
+  # diagnostics: the aggregator (its plugins are in the -dev package) and the printer (health)
+  libdiagnostic-aggregator-tools libdiagnostic-aggregator-dev rosdiagnostic
+  # tf tools (view_frames, tf_monitor, tf_echo) and rosdep (scripts/rosdep.sh, README "Set-up with rosdep")
+  tf2-tools tf-tools python3-tf python3-rosdep2
 )
 
 log() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }

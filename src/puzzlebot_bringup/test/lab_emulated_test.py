@@ -81,7 +81,8 @@ class Recorder:
 
     def on_diag(self, msg):
         with self.lock:
-            self.diag = {s.name: {kv.key: kv.value for kv in s.values} for s in msg.status}
+            # every node publishes /diagnostics (driver, MPC): keep the latest status of each name
+            self.diag = dict(self.diag or {}, **{s.name: {kv.key: kv.value for kv in s.values} for s in msg.status})
 
     def window(self, kind, name, t0, t1):
         with self.lock:

@@ -35,8 +35,9 @@ from puzzlebot_common.node_utils import get_param, robot_list_from_param
 from puzzlebot_msgs.msg import ConnectionPair
 from puzzlebot_bringup.runner import Runner
 from puzzlebot_bringup.scenario import parse_scenario
+from puzzlebot_sim.config import load_sim_config
 
-POSE_RATE = 100.0          # Hz of simulated time (puzzlebot_sim config/sim.yaml pose_rate)
+POSE_RATE = float(load_sim_config().sim.pose_rate)   # Hz of simulated time, the sim node's pose rate
 SUBSCRIBE_TIMEOUT = 30.0   # s (wall) for rosbag record to subscribe to the topics
 STOP_TIMEOUT = 30.0        # s (wall) for rosbag record to close the bag
 IDENTIFY_TIMEOUT = 120.0   # s (wall) for identify_model on the short bag (0.4 s unloaded)

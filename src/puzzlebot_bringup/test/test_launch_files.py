@@ -10,6 +10,7 @@ import pytest
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_driver.params import driver_config, emulator_config
+from puzzlebot_sim.params import SimParams
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PKG = os.path.dirname(HERE)
@@ -40,16 +41,30 @@ def test_every_arg_is_documented(name):
         assert a.get("doc"), "%s.launch: arg %s has no doc" % (name, a.get("name"))
 
 
+def sim_params(config):
+    """The SimParams the sim node builds from its ~sim parameters (the defaults for keys not set)."""
+    prefix = "/sim/sim/"
+    return SimParams.from_dict({k[len(prefix):]: p.value for k, p in config.params.items() if k.startswith(prefix)})
+
+
 def test_sim_launch_defaults_and_options():
     c = load_launch("sim")
-    assert node_names(c) == ["mpc", "scenario_runner", "sim"]
+    assert node_names(c) == ["diagnostic_aggregator", "mpc", "robot_state_publisher", "scenario_runner", "sim"]
+    assert c.params["/diagnostic_aggregator/analyzers/sim/startswith"].value == ["puzzlebot_sim"]
+    assert "/diagnostic_aggregator/analyzers/driver/path" not in c.params
     assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2", "pz3", "pz4"]
     assert c.params["/sim/sim/world"].value == "flat" and c.params["/use_sim_time"].value is True
     assert c.params["/sim/sim/mocap_position_std"].value == 0.0003 and c.params["/sim/sim/seed"].value == 0
     c = load_launch("sim", mocap="ideal", seed="7")
-    assert c.params["/sim/sim/mocap_position_std"].value == 0.0 and c.params["/sim/sim/seed"].value == 7
-    c = load_launch("sim", scenario="chain_step", robots="2", rviz="true", record="true", bag="/tmp/x.bag")
-    assert node_names(c) == ["markers", "mpc", "record", "rviz", "scenario_runner", "sim"]
+    assert sim_params(c).mocap_position_std == 0.0 and c.params["/sim/sim/seed"].value == 7
+    c = load_launch("sim", scenario="chain_step", robots="2", rviz="true", record="true", bag="/tmp/x.bag",
+                    diagnostics="false")
+    assert node_names(c) == ["markers", "mpc", "record", "robot_state_publisher", "rviz", "scenario_runner", "sim"]
+    description = ET.fromstring(c.params["/robot_description"].value)       # the robots' model, the pilot's
+    links = {link.get("name") for link in description.findall("link")}
+    assert {"pz1/front_left_wheel", "pz2/left_wheel", "pz1/anchor", "pz2/anchor_head"} <= links
+    joints = {j.get("name"): j.get("type") for j in description.findall("joint")}
+    assert joints["pz1/base_joint"] == joints["pz1/anchor_joint"] == "floating"    # both poses from the sim's tf
     robots = parse_robot_list(c.params["/puzzlebot/robots"].value)
     assert [(r.name, r.pilot) for r in robots] == [("pz1", True), ("pz2", False)]
     assert sorted(c.params["/puzzlebot/scenario"].value["start"]) == ["pz1", "pz2"]
@@ -79,15 +94,19 @@ def test_wrong_arguments_stop_roslaunch_with_one_clear_line(launch, args, messag
 def test_lab_launch_emulate_port_and_record():
     lab = load_launch("lab", port="9123")
     emu = load_launch("lab", emulate="true", port="0", record="true")
-    assert node_names(lab) == ["driver", "mpc"]
-    assert node_names(emu) == ["driver", "emulator", "mpc", "record"]
+    assert node_names(lab) == ["diagnostic_aggregator", "driver", "mpc", "robot_state_publisher"]
+    assert node_names(emu) == ["diagnostic_aggregator", "driver", "emulator", "mpc", "record", "robot_state_publisher"]
+    joints = {j.get("name"): j.get("type") for j in ET.fromstring(lab.params["/robot_description"].value).iter("joint")}
+    assert joints["p21/anchor_joint"] == "fixed"           # nothing measures a lab anchor: drawn at rest
+    groups = {k.split("/")[3] for k in lab.params if k.startswith("/diagnostic_aggregator/analyzers/")}
+    assert groups == {"mpc", "driver"}                     # no simulation group in the lab (it would be stale)
     assert lab.params["/driver/driver/port"].value == 9123
     assert emu.params["/emulator/emulator/port"].value == 0 and emu.params["/driver/bound_port"].value == 0
     assert emu.params["/use_sim_time"].value is False
     robots = parse_robot_list(emu.params["/puzzlebot/robots"].value)
     assert all(r.ip_octet is not None for r in robots)
     assert "/puzzlebot/scenario" not in emu.params
-    assert node_names(load_launch("lab", mpc="false")) == ["driver"]
+    assert node_names(load_launch("lab", mpc="false", diagnostics="false")) == ["driver", "robot_state_publisher"]
 
 
 def test_lab_launch_scenario_and_robot_list_combine():
@@ -103,11 +122,11 @@ def test_lab_launch_scenario_and_robot_list_combine():
 
 def test_replay_launch_plays_with_the_runs_robots():
     c = load_launch("replay", bag="/tmp/run.bag", scenario="couple2")
-    assert node_names(c) == ["markers", "play", "rviz"]
+    assert node_names(c) == ["markers", "play", "robot_state_publisher", "rviz"]
     assert [r.name for r in parse_robot_list(c.params["/puzzlebot/robots"].value)] == ["pz1", "pz2"]
     assert [n for n in c.nodes if n.name == "play"][0].args == "--clock -r 1.0 /tmp/run.bag"
     lab = load_launch("replay", bag="/tmp/run.bag", rviz="false", robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
-    assert node_names(lab) == ["markers", "play"]
+    assert node_names(lab) == ["markers", "play", "robot_state_publisher"]
     assert [r.ip_octet for r in parse_robot_list(lab.params["/puzzlebot/robots"].value)] == [41, 42, 43]
 
 

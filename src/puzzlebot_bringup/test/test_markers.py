@@ -13,7 +13,8 @@ from puzzlebot_common.geometry import RobotGeometry, transform_point
 from puzzlebot_common.robots import RobotSpec
 from puzzlebot_msgs.msg import (BehaviorObjectives, ConnectionPair, PredictedTrajectories,
                                 RobotTrajectory)
-from puzzlebot_bringup.markers import AnchorShape, MarkerStyle, assemblies, build_markers, placed_slots
+from puzzlebot_bringup.markers import (AnchorShape, MarkerStyle, assemblies, build_markers, placed_slots,
+                                       view_centre)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 GEO = RobotGeometry()
@@ -96,8 +97,12 @@ def test_predicted_paths_and_goals_in_the_world_robots_without_pose_skipped():
                                          RobotTrajectory(robot="pz9", poses=[Pose2D(1, 1, 0)])])
     obj = BehaviorObjectives(behavior="go_to_goal", goal_robots=["pz3"], goals=[Point(0.3, -0.1, 0.0)])
     ns = by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, predicted=pred, objectives=obj))
-    assert len(ns["predicted"]) == 1 and ns["predicted"][0].header.frame_id == "world"
-    assert xy(ns["predicted"][0].points) == pytest.approx([0, 0, 0.01, 0])
+    line, dots = ns["predicted"]                      # pz1's path: a line and a dot per step; pz9 has no pose
+    assert line.header.frame_id == dots.header.frame_id == "world"
+    assert (line.type, dots.type) == (Marker.LINE_STRIP, Marker.POINTS)
+    assert xy(line.points) == pytest.approx([0, 0, 0.01, 0]) and xy(dots.points) == pytest.approx([0.01, 0])
+    still = PredictedTrajectories(robots=[RobotTrajectory(robot="pz1", poses=[Pose2D(0, 0, 0)] * 11)])
+    assert "predicted" not in by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, predicted=still))   # at rest
     assert (ns["goals"][0].pose.position.x, ns["goals"][0].pose.position.y) == pytest.approx((0.3, -0.1))
     assert "slots" not in ns
 
@@ -118,3 +123,26 @@ def test_target_slots_are_placed_on_the_largest_coupled_assembly():
     obj = BehaviorObjectives(behavior="couple", target="line", slot_robots=robots, slots=[Pose2D(*s) for s in slots])
     ns = by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, coupled, objectives=obj))
     assert len(ns["slots"]) == 3 and len(ns["slots"][2].points) == 10      # 4 edges + heading tick
+
+
+def test_legend_in_the_view_frame_one_line_per_colour():
+    ns = by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, anchor_shape=AnchorShape(0.02, 0.005, 0.5)))
+    legend = ns["legend"]
+    texts = [m.text for m in legend]
+    assert {m.header.frame_id for m in legend} == {"puzzlebot/view"}
+    assert "pilot robot" in texts and "pair coupled (MPC)" in texts and "anchor seated (Bullet)" in texts
+    coupled = legend[texts.index("pair coupled (MPC)")]
+    assert (coupled.color.r, coupled.color.g, coupled.color.b) == pytest.approx(STYLE.head_inserted[:3])
+    ys = [m.pose.position.y for m in legend]
+    assert ys == sorted(ys, reverse=True) and len(set(ys)) == len(ys)       # one line each, top down
+    # the lab (no physical pairs, no pilot): no Bullet entries, no pilot entry
+    lab = [m.text for m in by_ns(build_markers([RobotSpec("p21")], GEO, STYLE, {}))["legend"]]
+    assert not any("Bullet" in t for t in lab) and "pilot robot" not in lab
+    assert "legend" not in by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, legend=False))
+
+
+def test_view_centre_is_the_middle_of_the_robots_bounding_box():
+    assert view_centre(POSES) == pytest.approx((-0.1, 0.025))
+    assert view_centre({}) == (0.0, 0.0)
+    assert view_centre({}, previous=(0.3, 0.1)) == (0.3, 0.1)                # nobody seen: the view stays
+    assert view_centre(POSES, previous=(0.1, 0.025), smoothing=0.5) == pytest.approx((0.0, 0.025))

@@ -108,3 +108,74 @@ def test_the_checks_see_a_forbidden_import(tmp_path):
     f = tmp_path / "m.py"
     f.write_text("def f():\n    from puzzlebot_mpc.effects import X\n    import casadi.tools as t\n")
     assert {"puzzlebot_mpc", "casadi"} <= imports(str(f))
+
+
+#: Module -> the rosdep key that provides it (rosdep/puzzlebot.yaml and Debian's rosdep data resolve
+#: each). The Python standard library and the workspace's own packages need none.
+MODULE_KEYS = {
+    "numpy": "python3-numpy", "scipy": "python3-scipy", "matplotlib": "python3-matplotlib", "yaml": "python3-yaml",
+    "PIL": "python3-pil", "dateutil": "python3-dateutil", "pytest": "python3-pytest", "rospkg": "python3-rospkg",
+    "casadi": "casadi", "clarabel": "clarabel", "qdldl": "qdldl", "distributed": "dask-distributed",
+    "dask": "dask-distributed", "pybullet": "pybullet", "pybullet_data": "pybullet",
+    "rospy": "rospy", "rosgraph": "rosgraph", "roslaunch": "roslaunch", "rostest": "rostest", "rosbag": "rosbag",
+    "roslz4": "rosbag", "rosunit": "rostest", "genpy": "genpy", "tf2_ros": "tf2_ros", "tf2_msgs": "tf2_msgs",
+    "actionlib": "actionlib", "actionlib_msgs": "actionlib_msgs", "dynamic_reconfigure": "dynamic_reconfigure",
+    "rosdiagnostic": "rosdiagnostic", "std_msgs": "std_msgs", "geometry_msgs": "geometry_msgs",
+    "sensor_msgs": "sensor_msgs", "visualization_msgs": "visualization_msgs", "diagnostic_msgs": "diagnostic_msgs",
+    "rosgraph_msgs": "rosgraph_msgs",
+}
+#: Imports a file makes only when a caller hands it such objects (model.py: CasADi symbols); the package
+#: need not depend on them (a test_depend covers the test that does).
+OPTIONAL = {os.path.join("puzzlebot_common", "src", "puzzlebot_common", "model.py"): {"casadi"}}
+
+
+def third_party(path, package):
+    """Modules a file imports that are neither the standard library, a workspace package nor a module
+    beside it (a test's helper)."""
+    import sys
+
+    here = os.path.dirname(path)
+    return {m for m in imports(path) if m not in sys.stdlib_module_names and not m.startswith("puzzlebot_")
+            and m != package and not os.path.isfile(os.path.join(here, m + ".py"))}
+
+
+def is_test(path, package):
+    return os.path.relpath(path, os.path.join(SRC, package)).split(os.sep)[0] == "test"
+
+
+@pytest.mark.parametrize("package", packages())
+def test_every_module_imported_is_a_declared_dependency(package):
+    """package.xml declares the rosdep key of every module the package imports (tests: at least as
+    test_depend), so rosdep installs what it needs (rosdep/puzzlebot.yaml, README)."""
+    declared_keys = declared(package)
+    tree = ET.parse(os.path.join(SRC, package, "package.xml")).getroot()
+    runtime = {e.text.strip() for tag in ("depend", "exec_depend", "buildtool_depend") for e in tree.iter(tag)}
+    bad = []
+    for path in python_files(package):
+        rel = os.path.relpath(path, SRC)
+        if os.path.basename(path) == "setup.py":
+            continue                    # catkin_python_setup's: the build tool (catkin) provides it
+        for module in sorted(third_party(path, package) - OPTIONAL.get(rel, set())):
+            key = MODULE_KEYS.get(module)
+            if key is None:
+                bad.append("%s imports %s: no rosdep key known (MODULE_KEYS)" % (rel, module))
+            elif key not in (declared_keys if is_test(path, package) else runtime):
+                bad.append("%s imports %s: %s/package.xml lacks %s%s" % (rel, module, package, key,
+                                                                        "" if is_test(path, package) else
+                                                                        " (exec_depend)"))
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("package", packages())
+def test_every_package_a_launch_file_starts_is_declared(package):
+    import re
+
+    launch = os.path.join(SRC, package, "launch")
+    used = set()
+    for d, _, files in os.walk(launch):
+        for f in files:
+            with open(os.path.join(d, f)) as fh:
+                text = fh.read()
+            used |= set(re.findall(r'pkg="([^"$]+)"', text)) | set(re.findall(r"\$\(find ([\w]+)\)", text))
+    missing = sorted(used - declared(package) - {package})
+    assert not missing, "%s/package.xml does not declare %s (its launch files use them)" % (package, ", ".join(missing))

@@ -15,7 +15,7 @@ SCRIPT = os.path.join(os.path.dirname(__file__), "..", "scripts", "fold_limit")
 def test_square_tops_stop_the_fold_and_a_top_chamfer_lets_the_pair_fold_further():
     square = measure_concave_fold()
     chamfered = measure_concave_fold(replace(RobotParams(), top_chamfer=0.012))
-    # square tops meet at about a third of a radian (docs/sim.md, "Why the chain is a beam")
+    # square tops meet at about a third of a radian (notes/sim-trials.md, "Why the chain is a beam")
     assert square.coupled and 0.25 < square.fold < 0.45
     assert chamfered.coupled and chamfered.fold > square.fold + 0.15
     # lifted harder, the top corners lever the anchor out of the opening, past the fold held at 0.6 N

@@ -26,7 +26,7 @@ def test_the_default_holder_travels_yaws_and_pitches_more_than_the_papers():
     assert 0.2 < -play.yaw_out[0] < 0.32 and 0.2 < play.yaw_out[1] < 0.32
     # pushed in, the collar's flat ends square the anchor up against the pocket's walls
     assert max(abs(v) for v in play.yaw_in) < 0.6 * min(abs(v) for v in play.yaw_out)
-    # the ball and 2 mm collar pitch well beyond the paper's < 0.1 rad (docs/sim.md, "The lock and the
+    # the ball and 2 mm collar pitch well beyond the paper's < 0.1 rad (notes/sim-trials.md, "The lock and the
     # holder's pitch"), and where the base settles under one load depends on where it started
     assert min(play.pitch_up, -play.pitch_down) > 0.18 > PAPER["pitch"]
     assert 0.0 < play.pitch_spread < 0.15

@@ -71,3 +71,21 @@ def test_chain_table_and_figure_per_seed(tmp_path):
     assert rows[-1].startswith("| **all** | **1 of 3 down intact** |")
     page.chain_figure(recs, str(tmp_path / "chain.png"))
     assert os.path.getsize(str(tmp_path / "chain.png")) > 5000
+
+
+def test_bench_summary_quotes_the_table_it_sits_beside():
+    bench = {"steps": 50, "results": [{"robots": n, "horizon": h, "median_ms": n * h / 10, "p95_ms": n * h / 8,
+                                       "max_ms": n * h / 6, "failures": 0} for n in (2, 8, 32) for h in (3, 10)]}
+    text = page.bench_summary(bench)
+    assert "8 robots with Hm = 10, one step takes 8.0 ms median (p95 10.0 ms" in text      # the table's 8 x 10
+    assert "With 32 robots, one step takes 32.0 ms median (p95 40.0 ms" in text
+    assert "32 % of the 100 ms control period" in text
+    assert "Every configuration solved every step (6 configurations, 50 steps each)" in text
+    bench["results"][0]["failures"] = 2
+    assert "2 failed steps in all" in page.bench_summary(bench)
+
+
+def test_chain_figure_marks_intact_chains_that_were_not_down(tmp_path):
+    stuck = dict(_chain(4, True), success=False, time_s=None, upright_on_floor=1, timeout_s=30.0)
+    page.chain_figure([_chain(1, True), stuck], str(tmp_path / "chain.png"))
+    assert os.path.getsize(str(tmp_path / "chain.png")) > 5000

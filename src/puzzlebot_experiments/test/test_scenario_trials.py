@@ -52,3 +52,14 @@ def test_timeline_plot_is_written(tmp_path):
     path = str(tmp_path / "t.png")
     plot_trials(records, steps, path, "couple4_line, seed 1")
     assert os.path.getsize(path) > 5000
+
+
+def test_failure_text_whole_words_and_short_timeouts():
+    from puzzlebot_experiments.scenario_trials import failure_text
+
+    long = "timeout after 90.00 s; not coupled: anchor pz1->pz2 (decoupled), knob pz2->pz4 (head_aligned), " \
+           "anchor pz3->pz4 (decoupled)"
+    text = failure_text(long)
+    assert text.startswith("timeout (90 s): not coupled: anchor pz1->pz2 (decoupled)")
+    assert len(text) <= 99 and text.endswith(" ...") and "(head_al" not in text.replace("(head_aligned)", "")
+    assert failure_text("pz1-pz3 not seated") == "pz1-pz3 not seated"

@@ -15,7 +15,8 @@ def test_one_configuration_prints_one_json_line(capsys):
     assert (r["robots"], r["horizon"], r["steps"], r["failures"]) == (3, 3, 8, 0)
     assert r["coupled_pairs"] == 2 and r["pairs_lost"] == 0 and r["min_pip_margin_mm"] >= 0.0
     assert r["lead_moved_m"] > 0.02            # the assembly really drove
-    assert 0 < r["solver_median_ms"] <= r["median_ms"]
+    assert 0 < r["solver_median_ms"] <= r["mpc_median_ms"] <= r["median_ms"]
+    assert r["solver"] == "active_set" and r["fallbacks"] == 0
 
 
 def test_table_lists_every_configuration():
@@ -49,3 +50,12 @@ def test_targets_and_page_block(tmp_path):
     out = page.read_text()
     assert out.startswith("before\n") and out.endswith("after\n") and "old" not in out
     assert "| 8, 10 | 2.0 / 2.5 | 80.0 / 90.0 | 40x |" in out
+
+
+def test_solver_comparison_table():
+    mine = [{"robots": 8, "horizon": 10, "median_ms": 2.0, "p95_ms": 2.5, "solver": "active_set",
+             "solver_median_ms": 0.5, "qp_iterations_median": 1.0}]
+    ref = [dict(mine[0], median_ms=6.0, p95_ms=7.0, solver="clarabel", solver_median_ms=4.0,
+                qp_iterations_median=12.0)]
+    text = bench.solver_comparison_table(mine, ref)
+    assert "| 8, 10 | 2.0 / 2.5 | 6.0 / 7.0 | 0.5 / 4.0 | 1 / 12 | 3.0x |" in text

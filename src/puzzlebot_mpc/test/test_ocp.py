@@ -109,12 +109,14 @@ def test_rti_and_ipopt_agree_on_a_coupled_pair_driving():
     obj.velocity_mask = np.array([[1.0, 1.0], [1.0, 0.0]])
     obj.pairs = [coupled_pair_objective()]
     out = {}
-    for solver in ("clarabel", "ipopt"):
+    for solver in ("active_set", "clarabel", "ipopt"):
         mpc = MultiRobotMPC(replace(base, solver=solver, sqp_iterations_cold=8), 2).setup()
         out[solver] = mpc.make_step(x0, obj)
         assert out[solver].success, out[solver].status
-    assert out["clarabel"].cost == pytest.approx(out["ipopt"].cost, rel=0.02, abs=1e-4)
-    assert np.allclose(out["clarabel"].commands, out["ipopt"].commands, atol=2e-3)
+    for rti in ("active_set", "clarabel"):
+        assert out[rti].cost == pytest.approx(out["ipopt"].cost, rel=0.02, abs=1e-4)
+        assert np.allclose(out[rti].commands, out["ipopt"].commands, atol=2e-3)
+    assert np.allclose(out["active_set"].commands, out["clarabel"].commands, atol=1e-5)
 
 
 def test_coupled_pair_never_infeasible_even_when_already_outside():

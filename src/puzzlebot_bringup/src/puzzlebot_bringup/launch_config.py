@@ -26,7 +26,8 @@ Arguments, as the launch files pass them:
   ``config/mocap_NAME.yaml``); an unknown one (``mocap:=vikon``) is refused.
 
 Parts printed (YAML): ``robots`` -> /puzzlebot/robots, ``scenario`` ->
-/puzzlebot/scenario, ``world`` -> the sim node's ``sim/world``.
+/puzzlebot/scenario, ``world`` -> the sim node's ``sim/world``; and (URDF)
+``description`` -> /robot_description (``description()``).
 """
 
 import glob
@@ -55,9 +56,10 @@ def known_scenarios(directory):
     return sorted(os.path.splitext(os.path.basename(p))[0] for p in glob.glob(os.path.join(directory, "*.yaml")))
 
 
-def known_worlds():
-    """World names of puzzlebot_sim. Importing it loads pybullet, whose C library prints its build
-    time on stderr: that line is kept off the launch output (stderr is redirected around the import)."""
+def _quiet_import(module):
+    """Import ``module`` of puzzlebot_sim. It loads pybullet, whose C library prints its build time on
+    stderr: that line is kept off the launch output (stderr is redirected around the import)."""
+    import importlib
     import sys
 
     sys.stderr.flush()
@@ -65,11 +67,26 @@ def known_worlds():
     try:
         with open(os.devnull, "w") as null:
             os.dup2(null.fileno(), 2)
-            from puzzlebot_sim.worlds import WORLDS
+            return importlib.import_module(module)
     finally:
         os.dup2(saved, 2)
         os.close(saved)
-    return sorted(WORLDS)
+
+
+def known_worlds():
+    """World names of puzzlebot_sim."""
+    return sorted(_quiet_import("puzzlebot_sim.worlds").WORLDS)
+
+
+def description(config, anchor):
+    """``/robot_description`` of the configuration's robots (puzzlebot_sim.description: the URDFs the
+    simulation loads, pilots and not, with their anchors): ``anchor`` "tf" (sim: the sim node
+    publishes where each anchor is) or "nominal" (lab: each anchor drawn at rest in its holder)."""
+    from puzzlebot_common.robots import parse_robot_list as parse
+
+    model = _quiet_import("puzzlebot_sim.description")
+    robot, anchor_params = _quiet_import("puzzlebot_sim.config").load_model()
+    return model.robot_description(parse(config.robots), robot, anchor_params, anchor=anchor)
 
 
 def load_scenario(directory, name):

@@ -11,18 +11,25 @@ Namespaces (one owner: this module):
 | --- | --- | --- |
 | ``bodies`` | body boxes, coloured robot / pilot | ``<robot>/base_link`` |
 | ``fronts`` | a line across the front face (the opening) | ``<robot>/base_link`` |
-| ``labels`` | robot names | ``<robot>/base_link`` |
+| ``labels`` | robot names, on the body's rear half | ``<robot>/base_link`` |
 | ``anchors`` | anchor bar, barbs, head: the simulated anchor body in ``<robot>/anchor`` (sim), else the nominal anchor C_a -> H_a | ``<robot>/anchor`` or ``base_link`` |
 | ``polygons`` | coupling polygon of each MPC connection pair (front triangle / knob region of robot_j), filled with the pair's status colour | ``<robot_j>/base_link`` |
 | ``pairs`` | line from the pair's head (anchor head H_a or knob) to robot_j's connection point, status colour | world |
 | ``physical`` | disc on the opening robot's front: anchor seated (sim physical pairs) or only in the opening | ``<robot_j>/base_link`` |
-| ``predicted`` | MPC predicted path of each robot | world |
+| ``predicted`` | MPC predicted path of each robot that moves: a line and a dot per control step (dots closer than a dot's size merged) | world |
 | ``goals`` | go_to_goal goals | world |
 | ``slots`` | target slots of a couple behaviour, placed on the largest coupled assembly | world |
+| ``legend`` | what each colour means, one line per entry in its colour, at the view's top left | ``puzzlebot/view`` |
 
 Markers in a robot's frame are frame-locked with stamp 0: rviz moves them
 with the latest tf. World-frame markers need the robots' poses
 (``poses``: name -> (x, y, z, yaw) of ``<robot>/base_link``).
+
+The view: the node publishes the frame ``puzzlebot/view`` (names.VIEW_FRAME,
+no rotation from ``world``) at the centre of the robots' bounding box
+(:func:`view_centre`); the shipped rviz configuration's top-down camera
+follows it, so the robots stay in the picture wherever they drive, and the
+legend, drawn in that frame, stays at the same place on the screen.
 """
 
 import math
@@ -52,8 +59,8 @@ class MarkerStyle:
     robot: Colour = (0.35, 0.55, 0.85, 0.7)
     pilot: Colour = (1.0, 0.55, 0.1, 0.7)
     front: Colour = (1.0, 1.0, 1.0, 1.0)
-    anchor: Colour = (0.15, 0.15, 0.15, 1.0)
-    anchor_width: float = 0.002
+    anchor: Colour = (0.85, 0.85, 0.85, 1.0)
+    anchor_width: float = 0.0025
     label: Colour = (1.0, 1.0, 1.0, 1.0)
     label_height: float = 0.012
     decoupled: Colour = (0.9, 0.2, 0.2, 1.0)
@@ -64,13 +71,19 @@ class MarkerStyle:
     seated: Colour = (0.0, 0.9, 0.9, 1.0)
     in_opening: Colour = (0.9, 0.2, 0.9, 1.0)
     physical_radius: float = 0.004
-    predicted: Colour = (1.0, 1.0, 1.0, 0.9)
-    predicted_width: float = 0.0025
+    predicted: Colour = (1.0, 1.0, 1.0, 1.0)
+    predicted_width: float = 0.003
+    predicted_dot: float = 0.004
     goal: Colour = (0.75, 0.3, 0.95, 0.9)
     goal_radius: float = 0.008
     slot: Colour = (0.8, 0.7, 1.0, 0.7)
     slot_width: float = 0.0015
     z_lift: float = 0.001
+    legend_x: float = -0.19
+    legend_y: float = 0.22
+    legend_height: float = 0.011
+    legend_spacing: float = 0.016
+    view_smoothing: float = 0.0
 
     @classmethod
     def from_dict(cls, data, where="markers"):
@@ -86,10 +99,13 @@ class MarkerStyle:
                         isinstance(c, (int, float)) and not isinstance(c, bool) and 0.0 <= c <= 1.0 for c in value):
                     raise ConfigError("%s.%s: expected a colour [r, g, b, a] of four numbers in 0..1, got %r"
                                       % (where, f.name, value))
-            elif f.name not in ("z_lift", "polygon_fill_alpha") and not value > 0:
+            elif f.name not in ("z_lift", "polygon_fill_alpha", "legend_x", "legend_y", "view_smoothing") and \
+                    not value > 0:
                 raise ConfigError("%s.%s: must be > 0, got %r" % (where, f.name, value))
         if not 0.0 <= self.polygon_fill_alpha <= 1.0 or self.z_lift < 0:
             raise ConfigError("%s: polygon_fill_alpha must be in 0..1 and z_lift >= 0" % where)
+        if not 0.0 <= self.view_smoothing < 1.0:
+            raise ConfigError("%s.view_smoothing: must be in [0, 1), got %r" % (where, self.view_smoothing))
 
     def status_colour(self, status):
         return {ConnectionPair.STATUS_DECOUPLED: self.decoupled, ConnectionPair.STATUS_HEAD_ALIGNED: self.head_aligned,
@@ -137,6 +153,16 @@ def _closed(vertices, z):
     return [_pt(x, y, z) for x, y in vertices] + [_pt(*vertices[0], z)]
 
 
+def _spaced(points, spacing):
+    """The first of ``points`` [(x, y)] and every next one at least ``spacing`` [m] from the last kept
+    (dots of a predicted path that do not pile up where the robot is slow)."""
+    out = points[:1]
+    for p in points[1:]:
+        if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) >= spacing:
+            out.append(p)
+    return out
+
+
 def _head_point(pair, geometry):
     """Body-frame head of robot_i: the anchor head H_a (anchor pairs) or the knob centre."""
     if pair.type == ConnectionPair.TYPE_KNOB:
@@ -177,8 +203,50 @@ def placed_slots(slot_robots, slots, poses, pairs):
     return out
 
 
+def view_centre(poses, previous=None, smoothing=0.0):
+    """(x, y) [m, world] of the view frame: the centre of the bounding box of the robots' positions
+    (``poses``: name -> (x, y, z, yaw)); ``previous`` (the last centre, or None) when no robot has a
+    pose, else moved towards the new centre by 1 - ``smoothing`` (0: at once)."""
+    if not poses:
+        return previous if previous is not None else (0.0, 0.0)
+    xs, ys = [p[0] for p in poses.values()], [p[1] for p in poses.values()]
+    centre = ((min(xs) + max(xs)) / 2.0, (min(ys) + max(ys)) / 2.0)
+    if previous is None or smoothing <= 0:
+        return centre
+    return tuple(smoothing * a + (1.0 - smoothing) * b for a, b in zip(previous, centre))
+
+
+def legend_entries(style, robots, physical=True):
+    """(text, colour) lines of the legend: bodies, pair statuses, the physical seating (``physical``:
+    the simulation publishes it), anchors, predicted paths, goals and target slots."""
+    out = [("robot", style.robot)]
+    if any(r.pilot for r in robots):
+        out.append(("pilot robot", style.pilot))
+    out += [("pair decoupled", style.decoupled), ("pair head aligned", style.head_aligned),
+            ("pair coupled (MPC)", style.head_inserted)]
+    if physical:
+        out += [("anchor seated (Bullet)", style.seated), ("anchor in opening (Bullet)", style.in_opening)]
+    out += [("anchor", style.anchor), ("predicted path (MPC)", style.predicted), ("goal", style.goal),
+            ("target slot", style.slot)]
+    return out
+
+
+def legend_markers(style, robots, physical=True):
+    """The legend: one TEXT_VIEW_FACING marker per entry, in names.VIEW_FRAME from (legend_x, legend_y)
+    downwards (style), each in its colour."""
+    out = []
+    for k, (text, colour) in enumerate(legend_entries(style, robots, physical)):
+        m = _marker("legend", k, Marker.TEXT_VIEW_FACING, names.VIEW_FRAME, colour, (0, 0, style.legend_height),
+                    locked=True)
+        m.color = _colour(colour, 1.0)
+        m.pose.position = _pt(style.legend_x, style.legend_y - k * style.legend_spacing, style.body_height)
+        m.text = text
+        out.append(m)
+    return out
+
+
 def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predicted=None, objectives=None,
-                  anchor_shape=None):
+                  anchor_shape=None, legend=True):
     """The MarkerArray of the current state (see the module docstring).
 
     robots: parsed robot list (RobotSpec: name, pilot); geometry: RobotGeometry;
@@ -187,7 +255,8 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
     messages; physical: the sim's physical ConnectionPair messages; predicted:
     PredictedTrajectories or None; objectives: BehaviorObjectives or None;
     anchor_shape: AnchorShape to draw the anchor body in <robot>/anchor (sim), or
-    None for the nominal anchor in base_link.
+    None for the nominal anchor in base_link; legend: add the legend (its physical
+    entries when ``anchor_shape`` is given: the simulation).
     """
     out = MarkerArray()
     clear = Marker(action=Marker.DELETEALL)
@@ -206,6 +275,7 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
         m.points = [_pt(L / 2, -geometry.opening_width, top), _pt(L / 2, geometry.opening_width, top)]
         add(m)
         m = _marker("labels", k, Marker.TEXT_VIEW_FACING, base, style.label, (0, 0, style.label_height), locked=True)
+        m.pose.position.x = -L / 4          # on the rear half: the predicted path leaves from the centre forward
         m.pose.position.z = h + 2 * style.label_height
         m.text = r.name + (" (pilot)" if r.pilot else "")
         add(m)
@@ -256,10 +326,17 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
     for k, t in enumerate(predicted.robots if predicted is not None else []):
         if t.robot not in poses or not t.poses:
             continue
+        dots = _spaced([(q.x, q.y) for q in t.poses], style.predicted_dot)
+        if len(dots) < 2:               # a robot planned to stay where it is: no path to draw
+            continue
         z = poses[t.robot][2] + top + 5 * style.z_lift
-        m = _marker("predicted", k, Marker.LINE_STRIP, names.WORLD_FRAME, style.predicted,
+        m = _marker("predicted", 2 * k, Marker.LINE_STRIP, names.WORLD_FRAME, style.predicted,
                     (style.predicted_width, 0, 0))
         m.points = [_pt(q.x, q.y, z) for q in t.poses]
+        add(m)
+        m = _marker("predicted", 2 * k + 1, Marker.POINTS, names.WORLD_FRAME, style.predicted,
+                    (style.predicted_dot, style.predicted_dot, 0))
+        m.points = [_pt(x, y, z) for x, y in dots[1:]]
         add(m)
 
     if objectives is not None:
@@ -283,5 +360,7 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
                 m.points += [_pt(a[0], a[1], z), _pt(b[0], b[1], z)]
             m.points += [_pt(x, y, z), _pt(front[0], front[1], z)]
             add(m)
+    if legend:
+        out.markers += legend_markers(style, robots, physical=anchor_shape is not None)
     return out
 

@@ -1,13 +1,14 @@
-"""rospy adapter that runs scenario steps through the MPC node.
+"""rospy adapter that runs scenario steps through the MPC node's behaviour action.
 
 Used by the ``scenario_runner`` node and by the integration tests (which add
 their physical checks between the steps). The scenario format and the
 summary are ROS-free (``scenario.py``); this module needs a running ROS graph.
 
-Reads /puzzlebot/mpc/behavior_status, /puzzlebot/mpc/solver_stats,
+Sends each step as a goal of the action /puzzlebot/mpc/behavior
+(puzzlebot_msgs/Behavior: its result says how the step ended); reads
+/puzzlebot/mpc/behavior_status, /puzzlebot/mpc/solver_stats,
 /puzzlebot/connection_pairs, /puzzlebot/sim/physical_pairs (when a
-simulation publishes it) and the robots' vicon topics; calls
-/puzzlebot/mpc/set_behavior.
+simulation publishes it) and the robots' vicon topics.
 """
 
 import collections
@@ -15,14 +16,16 @@ import math
 import threading
 import time
 
+import actionlib
 import rospy
+from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import Point, Pose2D, TransformStamped
 from rosgraph_msgs.msg import Clock
 
 from puzzlebot_common import names
 from puzzlebot_common.geometry import yaw_from_quaternion
-from puzzlebot_msgs.msg import BehaviorStatus, ConnectionPair, ConnectionPairArray, SolverStats
-from puzzlebot_msgs.srv import SetBehavior, SetBehaviorRequest
+from puzzlebot_msgs.msg import (BehaviorAction, BehaviorGoal, BehaviorStatus, ConnectionPair, ConnectionPairArray,
+                                SolverStats)
 from puzzlebot_mpc.ros_conversions import twist
 
 from puzzlebot_bringup.scenario import StepResult
@@ -36,6 +39,7 @@ START_DELAY = 1.0   # s of ROS time at least between submitting a script of step
 SCRIPT_START = 3.0  # s: ... which starts at this ROS time at the earliest: in a simulation (time from 0) a
                     # script then starts at the same control step whatever the graph's start-up timing
 POSE_HISTORY = 2000  # vicon samples kept per robot (20 s at 100 Hz), for the pose at a step's end
+ACCEPT_TIMEOUT = 30.0  # s (wall) for the MPC node to accept or reject a goal
 
 
 def pairs_text(msg):
@@ -45,10 +49,10 @@ def pairs_text(msg):
     return ", ".join("%s->%s %s" % (p.robot_i, p.robot_j, STATUS_TEXT.get(p.status, "?")) for p in msg.pairs)
 
 
-def step_request(step):
-    """SetBehaviorRequest of a scenario Step."""
-    req = SetBehaviorRequest(behavior=step.behavior, robots=step.robots, tolerance=step.tolerance,
-                             timeout=step.timeout, target=step.target, pair=step.pair, distance=step.distance)
+def step_goal(step, cls=BehaviorGoal):
+    """The request of a scenario Step: a BehaviorGoal (or ``cls``: SetBehaviorRequest has the same fields)."""
+    req = cls(behavior=step.behavior, robots=step.robots, tolerance=step.tolerance,
+              timeout=step.timeout, target=step.target, pair=step.pair, distance=step.distance)
     req.slots = [Pose2D(x=sl[0], y=sl[1], theta=sl[2]) for sl in step.slots]
     req.goals = [Point(x=g[0], y=g[1], z=0.0) for g in step.goals]
     req.velocities = [twist(v, w) for v, w in step.velocities]
@@ -77,7 +81,8 @@ class Runner:
         rospy.Subscriber(names.PHYSICAL_PAIRS_TOPIC, ConnectionPairArray, self._on_physical, queue_size=10)
         for r in robots:
             rospy.Subscriber(r.vicon_topic, TransformStamped, self._on_pose, callback_args=r.name, queue_size=20)
-        self.call = None
+        self.client = None
+        self.goals = {}         # request id -> actionlib ClientGoalHandle of its goal
 
     # ------------------------------------------------------------ callbacks
     def _on_status(self, msg):
@@ -132,10 +137,11 @@ class Runner:
             return sorted(n for n, log in self.pose_log.items() if not log)
 
     def connect(self, service_timeout=120.0, control_timeout=60.0):
-        """Wait for the MPC's service and its first solved step (it then has poses: couple needs them).
-        Returns False if no step was solved within ``control_timeout`` s (wall)."""
-        rospy.wait_for_service(names.SET_BEHAVIOR_SERVICE, timeout=service_timeout)
-        self.call = rospy.ServiceProxy(names.SET_BEHAVIOR_SERVICE, SetBehavior)
+        """Wait for the MPC's behaviour action and its first solved step (it then has poses: couple needs
+        them). Returns False if no step was solved within ``control_timeout`` s (wall)."""
+        self.client = actionlib.ActionClient(names.BEHAVIOR_ACTION, BehaviorAction)
+        if not self.client.wait_for_server(rospy.Duration(service_timeout)):
+            raise rospy.ROSException("no action server %s within %.0f s" % (names.BEHAVIOR_ACTION, service_timeout))
         end = time.monotonic() + control_timeout
         while not self.solved and not rospy.is_shutdown() and time.monotonic() < end:
             time.sleep(POLL)
@@ -162,14 +168,34 @@ class Runner:
                           "had run %.2f s, so runs of the same seed that started in time differ from this one"
                           % (start, SCRIPT_START, start - start_delay))
         for k, step in enumerate(steps):
-            req = step_request(step)
-            req.queue, req.start_time = k > 0, start if k == 0 and start_delay > 0 else 0.0
-            resp = self.call(req)
-            if not resp.accepted:
-                out.append(StepResult(step, "refused", resp.message, 0.0))
+            goal = step_goal(step)
+            goal.queue, goal.start_time = k > 0, start if k == 0 and start_delay > 0 else 0.0
+            accepted, detail = self.send(goal)
+            if not accepted:
+                out.append(StepResult(step, "refused", detail, 0.0))
                 break
-            out.append(resp.request_id)
+            out.append(detail)
         return out
+
+    def send(self, goal, timeout=ACCEPT_TIMEOUT):
+        """Send ``goal`` and wait (wall) until the MPC node accepts it (its first feedback names the request
+        id) or rejects it: (True, request id) or (False, the reason)."""
+        box = {}
+
+        def on_feedback(handle, feedback):
+            box.setdefault("id", feedback.request_id)
+        handle = self.client.send_goal(goal, feedback_cb=on_feedback)
+        end = time.monotonic() + timeout
+        while "id" not in box and not rospy.is_shutdown() and time.monotonic() < end:
+            if handle.get_comm_state() == actionlib.CommState.DONE:
+                result = handle.get_result()
+                if "id" not in box:
+                    return False, (result.message if result is not None else handle.get_goal_status_text())
+            time.sleep(POLL)
+        if "id" not in box:
+            return False, "the MPC node did not answer the goal within %.0f s" % timeout
+        self.goals[box["id"]] = handle
+        return True, box["id"]
 
     def run_steps(self, steps, default_timeout, wall_deadline, start_delay=START_DELAY):
         """Submit ``steps`` (submit) and yield each one's StepResult in order as it ends; stops after
@@ -186,25 +212,35 @@ class Runner:
         return next(self.run_steps([step], default_timeout, wall_deadline, start_delay=0.0))
 
     def wait_step(self, step, request_id, default_timeout, wall_deadline):
-        """Wait for the final status of request ``request_id`` (``step``): a StepResult whose
+        """Wait for the result of request ``request_id`` (``step``'s goal): a StepResult whose
         sim_seconds, final errors and pairs are those of the control step that ended it."""
         limit = (step.timeout or default_timeout) + SETTLE
         t_wait = rospy.get_time()
-        outcome, message, final = "timeout", "no final status from the MPC node", None
-        while not rospy.is_shutdown() and time.monotonic() < wall_deadline:
-            with self.lock:
-                final, started = self.ended.get(request_id), self.started.get(request_id)
-            if final is not None:
-                outcome = "succeeded" if final.state == BehaviorStatus.SUCCEEDED else "failed"
-                message = final.message
+        outcome, message, result = "timeout", "no result from the MPC node", None
+        handle = self.goals.get(request_id)
+        while handle is not None and not rospy.is_shutdown() and time.monotonic() < wall_deadline:
+            if handle.get_comm_state() == actionlib.CommState.DONE:
+                result = handle.get_result()
+                ok = handle.get_goal_status() == GoalStatus.SUCCEEDED and result is not None
+                outcome = "succeeded" if ok else "failed"
+                message = result.message if result is not None else handle.get_goal_status_text()
+                if result is not None and result.outcome not in ("succeeded", "failed"):
+                    message = "%s: %s" % (result.outcome, message)
                 break
+            with self.lock:
+                started = self.started.get(request_id)
             if rospy.get_time() - max(t_wait, started if started is not None else -math.inf) > limit:
                 message = "no result within %.1f s of simulated time" % limit
                 break
             time.sleep(POLL)
+        ended = result is not None and not result.ended.is_zero()
+        final = self.ended.get(request_id)
+        end = result.ended.to_sec() if ended else (final.header.stamp.to_sec() if final is not None
+                                                   else rospy.get_time())
         with self.lock:
             start = self.started.get(request_id, t_wait)
-        end = final.header.stamp.to_sec() if final is not None else rospy.get_time()
+        if result is not None and not result.started.is_zero():
+            start = result.started.to_sec()
         self.wait_until(end + 0.2)       # the pair and pose messages of that step have arrived
         errors = {}
         for name, goal in zip(step.robots, step.goals):

@@ -9,12 +9,15 @@ Used by the rostest ``rviz_screenshot`` and the ``rviz_screenshot`` script::
         problems = rviz_log_errors(log_path)
 
 rviz (the Debian package) renders with Mesa's software OpenGL under Xvfb.
+``robots_in_view`` reads, from the pixels alone, how many robots a screenshot
+of the shipped configuration shows and whether one is cut by the view's edge.
 """
 
 import os
 import signal
 import subprocess
 import time
+from dataclasses import dataclass
 
 #: Log lines that contain ERROR but are not a problem of the stack or its rviz configuration.
 BENIGN_ERRORS = (
@@ -145,3 +148,68 @@ def hue_pixels(image, box=None):
             "orange": int(((r > g + 50) & (g > b + 40)).sum()),
             "red": int(((r > g + 80) & (r > b + 80) & (g < 100)).sum()),
             "yellow": int(((r > 180) & (g > 140) & (b < 80)).sum())}
+
+
+def _masks(image, box=None):
+    """Masks of robot bodies (blue robots, orange pilots), yellow (knobs) and the dark floor."""
+    import numpy as np
+
+    img = image.convert("RGB")
+    if box is not None:
+        img = img.crop(box)
+    a = np.asarray(img, dtype=int)
+    r, g, b = a[..., 0], a[..., 1], a[..., 2]
+    body = ((b > r + 60) & (b > g + 20)) | ((r > g + 50) & (g > b + 40))      # blue robots, orange pilots
+    knob = (r > 180) & (g > 140) & (b < 80)                                    # the yellow side knobs
+    background = (a.max(axis=2) - a.min(axis=2) < 20) & (a.max(axis=2) < 120)  # dark grey floor and grid
+    return body, knob, background
+
+
+@dataclass
+class RobotsInView:
+    """What a screenshot shows of the robots (``robots_in_view``)."""
+
+    knobs: int             # robots seen: each robot's knob, a yellow disc on its left side next to its body
+    cut: int               # robot bodies (blue or orange regions) touching the view's edge
+    body_pixels: int
+
+
+def robots_in_view(image, box=None, min_knob=20, min_fill=0.4, max_aspect=2.5, min_body=200, reach=3,
+                   min_outside=0.25):
+    """Count the robots in a screenshot of the shipped rviz view (``box``: the 3D view, (left, top,
+    right, bottom); None: the whole image), from the pixels.
+
+    Robots are counted by their knobs: every robot model (RobotModel, the URDF's yellow knob) has one
+    on its left side, sticking out of the body, so it shows from above even when robots are coupled
+    and their bodies touch. A knob is a compact yellow region (at least ``min_knob`` px, filling at
+    least ``min_fill`` of its bounding box, sides within ``max_aspect`` of each other: not a pair's
+    yellow outline, not a letter of the legend) within ``reach`` px of a robot body (a blue or orange
+    region of at least ``min_body`` px) and sticking out of it: at least ``min_outside`` of the pixels
+    around it are the dark floor (not a yellow pair line drawn on a body). ``cut``: robot bodies touching the view's edge (a robot
+    partly out of the picture). Pixel sizes are those of the shipped view (1400 px/m).
+    """
+    import numpy as np
+    from scipy import ndimage
+
+    body, knob, background = _masks(image, box)
+    labels, n = ndimage.label(body)
+    sizes = ndimage.sum(body, labels, range(1, n + 1))
+    bodies = np.isin(labels, [k + 1 for k, size in enumerate(sizes) if size >= min_body])
+    near_body = ndimage.binary_dilation(bodies, iterations=reach)
+    knobs = 0
+    klabels, kn = ndimage.label(knob)
+    for k, sl in enumerate(ndimage.find_objects(klabels), start=1):
+        region = klabels[sl] == k
+        h, w = region.shape
+        area = int(region.sum())
+        if area < min_knob or area < min_fill * h * w or max(h, w) > max_aspect * min(h, w):
+            continue
+        grown = tuple(slice(max(0, d.start - 2), d.stop + 2) for d in sl)
+        inside = klabels[grown] == k
+        ring = ndimage.binary_dilation(inside, iterations=2) & ~inside
+        if near_body[grown][ring].any() and background[grown][ring].mean() >= min_outside:
+            knobs += 1
+    edge = np.zeros_like(bodies)
+    edge[0, :] = edge[-1, :] = edge[:, 0] = edge[:, -1] = True
+    cut = len(set(np.unique(labels[edge & bodies])) - {0})
+    return RobotsInView(knobs, cut, int(bodies.sum()))

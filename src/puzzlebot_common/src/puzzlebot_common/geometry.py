@@ -79,7 +79,13 @@ def point_in_convex_polygon(vertices, p, eps=0.0):
 
 @dataclass(frozen=True)
 class RobotGeometry:
-    """Dimensions the controller needs (metres). Defaults: facts.md."""
+    """The robot's dimensions (metres, radians; defaults: facts.md), defined once for every package.
+
+    The controller plans with them; the simulation's ``RobotParams`` (body
+    side, wheel track, knob: the URDF) and the emulated motors
+    (``MotorParams.wheel_base``) take their defaults from the class's fields.
+    The robot's limits and the set-up's rates: :mod:`puzzlebot_common.hardware`.
+    """
 
     body_side: float = 0.05        # L: square body, origin at its centre
     anchor_length: float = 0.0125  # l: anchor head point C' = C + [-l, 0]

@@ -7,6 +7,10 @@ node and tool builds them with these helpers instead of formatting strings.
 #: Fixed world frame of the motion-capture system and of the simulation.
 WORLD_FRAME = "world"
 
+#: Frame at the centre of the robots (no rotation from WORLD_FRAME): the shipped rviz view follows it
+#: (puzzlebot_bringup markers node).
+VIEW_FRAME = "puzzlebot/view"
+
 #: Namespace of stack-wide topics, services and parameters.
 STACK_NS = "/puzzlebot"
 
@@ -16,6 +20,8 @@ PHYSICAL_PAIRS_TOPIC = STACK_NS + "/sim/physical_pairs"
 SOLVER_STATS_TOPIC = STACK_NS + "/mpc/solver_stats"
 BEHAVIOR_STATUS_TOPIC = STACK_NS + "/mpc/behavior_status"
 SET_BEHAVIOR_SERVICE = STACK_NS + "/mpc/set_behavior"
+#: puzzlebot_msgs/Behavior action of the MPC node: SET_BEHAVIOR_SERVICE with feedback, result and cancel.
+BEHAVIOR_ACTION = STACK_NS + "/mpc/behavior"
 PREDICTED_TRAJECTORIES_TOPIC = STACK_NS + "/mpc/predicted_trajectories"
 MPC_MARKERS_TOPIC = STACK_NS + "/mpc/markers"
 #: puzzlebot_msgs/BehaviorObjectives: goals and target slots of the running behaviour (MPC node).

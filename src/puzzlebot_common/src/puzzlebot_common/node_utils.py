@@ -70,3 +70,16 @@ def sleep_until(t):
     with cond:
         while rospy.get_time() < t - 1e-6 and not rospy.is_shutdown():
             cond.wait(0.1)
+
+
+def diagnostic_array(statuses, stamp):
+    """diagnostic_msgs/DiagnosticArray of puzzlebot_common.diagnostics.Status objects, stamped ``stamp``."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    msg = DiagnosticArray()
+    msg.header.stamp = stamp
+    for s in statuses:
+        msg.status.append(DiagnosticStatus(level=s.level, name=s.name, message=s.message,
+                                           hardware_id=s.hardware_id,
+                                           values=[KeyValue(key=k, value=v) for k, v in s.values]))
+    return msg

@@ -18,6 +18,8 @@ robot list, never from an IP address in code.
 from dataclasses import asdict, dataclass
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_common.hardware import MOCAP_RATE, MPS_PER_PWM, V_MAX, W_MAX
 from puzzlebot_common.params import from_mapping, require_positive
 from puzzlebot_common.pose_gate import PoseGateParams
 from puzzlebot_driver.protocol import PWM_LIMIT
@@ -72,19 +74,19 @@ class DriverParams:
     loop_rate: float = 30.0           # Hz, velocity loop and PWM lines
     pose_timeout: float = 0.2         # s, pose older than this (by its stamp) -> zero PWM
     cmd_timeout: float = 0.5          # s, cmd_vel older than this -> zero PWM
-    v_limit: float = 0.2              # m/s, |v| above is rejected (hardware limit)
-    w_limit: float = 6.0              # rad/s, |w| above is rejected (hardware limit)
+    v_limit: float = V_MAX            # m/s, |v| above is rejected (the hardware limit)
+    w_limit: float = W_MAX            # rad/s, |w| above is rejected (the hardware limit)
     v_stop: float = 0.001             # m/s, |v| below and |w| below w_stop = a stop: PWM 0
-    w_stop: float = 0.01              # rad/s
+    w_stop: float = 0.01              # rad/s, see v_stop
     max_clock_skew: float = 0.05      # s, a pose stamped further in the future is rejected
     estimator_window: float = 0.05    # s, span of the finite difference over mocap poses
     estimator_tau: float = 0.03       # s, low-pass time constant of the estimate (0: none)
     estimator_max_gap: float = 0.2    # s, a longer gap between poses restarts the estimate
     mocap_rate_window: float = 1.0    # s, window of the reported mocap rate
     diagnostics_rate: float = 1.0     # Hz, /diagnostics
-    keepalive_idle: float = 2.0       # s, TCP keepalive: a silent dead robot is dropped after
-    keepalive_interval: float = 1.0   # s      idle + count * interval
-    keepalive_count: int = 3
+    keepalive_idle: float = 2.0       # s, TCP keepalive: a silent dead robot is dropped after idle + count x interval
+    keepalive_interval: float = 1.0   # s, between keepalive probes
+    keepalive_count: int = 3          # unanswered probes before the link is dropped
     ack_timeout: float = 3.0          # s, data unacknowledged this long drops the link (TCP_USER_TIMEOUT)
     send_stall_timeout: float = 1.0   # s, a robot that accepts no data this long is disconnected
 
@@ -184,13 +186,13 @@ class MotorParams:
     right +) reached with a first-order lag ``tau``.
     """
 
-    mps_per_pwm: float = 0.0007   # m/s of wheel rim speed per PWM unit, nominal (lab: 0.0007)
+    mps_per_pwm: float = MPS_PER_PWM  # m/s of wheel rim speed per PWM unit, nominal (the lab's figure)
     gain: float = 0.95            # -, actual / nominal motor gain
     imbalance: float = 0.04       # -, right wheel faster by this fraction of the mean
     deadband: float = 4.0         # PWM, |pwm| at or below this does not turn the wheel
     tau: float = 0.05             # s, first-order lag of the wheel speed
     delay: float = 0.03           # s, WiFi + firmware latency of a PWM line
-    wheel_base: float = 0.04      # m, distance between the wheel contact points
+    wheel_base: float = RobotGeometry.wheel_base  # m, distance between the wheel contact points
 
     @classmethod
     def from_dict(cls, data, where="motor"):
@@ -217,7 +219,7 @@ class EmulatorParams:
     reconnect_period: float = 0.5     # s between connection attempts
     zero_on_disconnect: bool = False  # the lab firmware keeps its last PWM when the link drops
     physics_rate: float = 200.0       # Hz, integration step of the robots
-    pose_rate: float = 100.0          # Hz, emulated Vicon
+    pose_rate: float = float(MOCAP_RATE)  # Hz, emulated Vicon (the lab's rate)
     noise_xy: float = 0.0002          # m, std of the mocap position noise
     noise_yaw: float = 0.002          # rad, std of the mocap yaw noise
     seed: int = 0                     # noise seed

@@ -13,7 +13,6 @@ blocks of docs/results.md are rewritten (puzzlebot_experiments.results_page).
 """
 
 import json
-import multiprocessing
 import os
 import platform
 import sys
@@ -21,6 +20,7 @@ import time
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_experiments import experiments as ex
+from puzzlebot_experiments.executors import make_executor
 from puzzlebot_experiments import results_page as page
 
 
@@ -61,8 +61,8 @@ def _chain_one(seed):
     return chain_step_trial(seed, sim=cfg.sim, robot=cfg.robot, anchor=cfg.anchor)
 
 
-def chain_trials(seeds, jobs, results):
-    """Chain-of-three trials, kept in ``results`` (one JSON line each, keyed by seed and version)."""
+def chain_trials(seeds, executor, results):
+    """Chain-of-three trials on ``executor``, kept in ``results`` (one JSON line each, keyed by seed and version)."""
     version = ex.config_hash({"experiment": "chain"})
     store = ex.ResultsFile(results)
     have = {r["seed"]: r for r in store.load() if r.get("experiment") == "chain" and r.get("config") == version}
@@ -70,34 +70,37 @@ def chain_trials(seeds, jobs, results):
     progress = ex.Progress("chain down the step", len(seeds), len(seeds) - len(todo))
     progress.ok = sum(bool(have[s]["success"]) for s in seeds if s in have)
     progress.show()
-    with multiprocessing.get_context("fork").Pool(max(1, min(jobs, len(todo) or 1))) as pool:
-        for rec in pool.imap_unordered(_chain_one, todo):
-            rec = dict(rec, experiment="chain", config=version)
-            store.append(rec)
-            have[rec["seed"]] = rec
-            progress.update(rec["success"])
+    for rec in executor.run(_chain_one, todo):
+        rec = dict(rec, experiment="chain", config=version)
+        store.append(rec)
+        have[rec["seed"]] = rec
+        progress.update(rec["success"])
     return [have[s] for s in seeds]
 
 
 def run(args, out=sys.stdout):
     """Run the suite (args: see scripts/experiments); returns the summary dict."""
+    with make_executor(args.cluster, args.jobs or None) as executor:
+        return _run(args, executor, out)
+
+
+def _run(args, executor, out):
     t0 = time.monotonic()
     offsets = offsets_from(args.offsets)
-    jobs = args.jobs or os.cpu_count() or 1
     os.makedirs(args.img, exist_ok=True)
     summary = {"machine": machine(), "seed": args.seed, "trials": args.trials, "commit": ex.code_version(),
-               "config": ex.config_hash()}
+               "config": ex.config_hash(), "executor": executor.describe()}
 
     t = time.monotonic()
-    couple = ex.run_sweep(ex.tasks_for(ex.COUPLE, args.trials, args.seed, offsets), args.results, jobs,
-                          label="couple %g-%g mm" % (offsets[0], offsets[-1]))
+    couple = ex.run_sweep(ex.tasks_for(ex.COUPLE, args.trials, args.seed, offsets), args.results,
+                          label="couple %g-%g mm" % (offsets[0], offsets[-1]), executor=executor)
     summary["couple_wall_s"] = round(time.monotonic() - t, 1)
     summary["couple"] = {"%g" % o: ex.summarize(r) for o, r in page.by_offset(couple).items()}
     page.couple_figure(couple, os.path.join(args.img, "results_coupling.png"))
 
     t = time.monotonic()
-    decouple = ex.run_sweep(ex.tasks_for(ex.DECOUPLE, args.trials, args.seed), args.results, jobs,
-                            label="decouple")
+    decouple = ex.run_sweep(ex.tasks_for(ex.DECOUPLE, args.trials, args.seed), args.results,
+                            label="decouple", executor=executor)
     summary["decouple_wall_s"] = round(time.monotonic() - t, 1)
     summary["decouple"] = ex.summarize(decouple)
     page.decouple_figure(decouple, os.path.join(args.img, "results_decoupling.png"))
@@ -109,6 +112,7 @@ def run(args, out=sys.stdout):
             bench = json.load(f)
         page.bench_figure(bench, os.path.join(args.img, "results_mpc_time.png"))
         blocks["bench_table"] = page.bench_table(bench)
+        blocks["bench_summary"] = page.bench_summary(bench)
     else:
         out.write("experiments: no benchmark file %s (make bench writes it): MPC table not updated\n" % args.bench)
 
@@ -125,7 +129,7 @@ def run(args, out=sys.stdout):
     blocks["force_table"] = page.force_table(summary["force"])
 
     t = time.monotonic()
-    chain = chain_trials(list(range(args.seed, args.seed + args.chain_trials)), jobs, args.results)
+    chain = chain_trials(list(range(args.seed, args.seed + args.chain_trials)), executor, args.results)
     summary["chain_wall_s"] = round(time.monotonic() - t, 1)
     summary["chain"] = {"trials": len(chain), "successes": sum(bool(r["success"]) for r in chain)}
     blocks["chain_table"] = page.chain_table(chain)
@@ -159,6 +163,7 @@ def run_info(s):
         "| code | `%s`, configuration hash `%s` |" % (s["commit"], s["config"]),
         "| machine | %s, %d cores, Python %s, load average %s at the end |" % (
             m["cpu"], m["cores"] or 0, m["python"], m["load_avg_1_5_15"]),
+        "| trials ran on | %s |" % s.get("executor", "a local process pool"),
         "| wall time | coupling %.0f s, decoupling %.0f s, chain %.0f s, lines %.0f s, all %.0f s (trials already "
         "in the results file are not rerun) |" % (s["couple_wall_s"], s["decouple_wall_s"], s["chain_wall_s"],
                                                  s.get("assembly_wall_s", 0.0), s["wall_s"])])

@@ -28,19 +28,20 @@ Experiments (parameters: config/experiments.yaml, ExperimentParams):
 
 A trial's randomness comes from ``numpy.random.SeedSequence([seed, trial,
 experiment code, offset in um])``: trial k of seed S is the same trial on
-any machine and in any order. Sweeps run trials in worker processes and
-append each result as one JSON line to a results file; a sweep that is
+any machine and in any order. Sweeps run trials on an executor
+(puzzlebot_experiments.executors: a local process pool, or the workers of a
+Dask cluster) and append each result as one JSON line to a results file; a sweep that is
 interrupted continues where it stopped (finished trials are read back, keyed
 by experiment, offset, seed, trial and the version: a hash of configuration and sources).
 """
 
 import json
 import math
-import multiprocessing
 import os
 import sys
 import time
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -54,6 +55,7 @@ from puzzlebot_sim.config import load_sim_config
 from puzzlebot_sim.coupling import DECOUPLED, HEAD_INSERTED
 from puzzlebot_sim.world import RobotStart
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
+from puzzlebot_experiments.executors import LocalPool, add_cluster_option, make_executor
 from puzzlebot_experiments.trials import mated_pair
 from puzzlebot_experiments.version import code_version, config_hash
 
@@ -338,13 +340,9 @@ class ResultsFile:
 _CTX = None
 
 
-def _init_worker(nice, overrides=None):
+def _init_worker(overrides=None):
+    """A worker process's set-up: the configuration its trials share (executors' ``setup``)."""
     global _CTX
-    if nice:
-        try:
-            os.nice(nice)
-        except OSError:
-            pass
     _CTX = _Context(overrides=overrides)
 
 
@@ -401,12 +399,14 @@ def _hms(s):
     return "%d:%02d:%02d" % (s // 3600, s % 3600 // 60, s % 60) if s >= 3600 else "%d:%02d" % (s // 60, s % 60)
 
 
-def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=None, overrides=None):
-    """Run the tasks not yet in ``results_path`` (in ``jobs`` processes) and return the records of all tasks.
+def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=None, overrides=None, executor=None):
+    """Run the tasks not yet in ``results_path`` and return the records of all tasks.
 
-    Each finished trial is appended to the results file at once, so an
-    interrupted sweep loses at most the trials that were running.
-    ``overrides``: MPC settings to change (tuning); part of the version.
+    The trials run on ``executor`` (puzzlebot_experiments.executors: a Dask
+    cluster, ...; None: a local process pool of ``jobs`` processes with
+    niceness ``nice``). Each finished trial is appended to the results file
+    at once, so an interrupted sweep loses at most the trials that were
+    running. ``overrides``: MPC settings to change (tuning); part of the version.
     """
     overrides = dict(overrides or {})
     _Context(overrides=overrides)          # bad overrides fail here, before any worker starts
@@ -417,27 +417,21 @@ def run_sweep(tasks, results_path, jobs=None, nice=0, label="trials", stream=Non
     progress = Progress(label, len(tasks), len(tasks) - len(todo), stream)
     progress.ok = sum(bool(have[t.key(version)]["success"]) for t in tasks if t.key(version) in have)
     commit = code_version()
-    jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
     progress.show()
-
-    def keep(rec):
-        rec["config"] = version
-        rec["commit"] = commit
-        if overrides:
-            rec["overrides"] = overrides
-        results.append(rec)
-        have[record_key(rec)] = rec
-        progress.update(rec["success"])
-
-    if todo and jobs == 1:
-        _init_worker(0, overrides)
-        for t in todo:
-            keep(run_task(t))
-    elif todo:
-        with multiprocessing.get_context("fork").Pool(jobs, initializer=_init_worker,
-                                                        initargs=(nice, overrides)) as pool:
-            for rec in pool.imap_unordered(run_task, todo):
-                keep(rec)
+    own = executor is None
+    executor = LocalPool(jobs, nice) if own else executor
+    try:
+        for rec in executor.run(run_task, todo, setup=partial(_init_worker, overrides)):
+            rec["config"] = version
+            rec["commit"] = commit
+            if overrides:
+                rec["overrides"] = overrides
+            results.append(rec)
+            have[record_key(rec)] = rec
+            progress.update(rec["success"])
+    finally:
+        if own:
+            executor.close()
     return [have[t.key(version)] for t in tasks]
 
 
@@ -468,6 +462,7 @@ def _parse(argv, experiment):
     ap.add_argument("--seed", default="1", help="integer seed, or 'fresh': one drawn from the OS now (printed)")
     ap.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     ap.add_argument("--nice", type=int, default=0, help="niceness increment of the workers")
+    add_cluster_option(ap)
     ap.add_argument("--results", default=os.path.join("build", "experiments", "results.jsonl"),
                     help="append-only results file (JSON lines); finished trials are not rerun")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -506,7 +501,8 @@ def main(experiment, argv=None):
         load_experiment_params()
         tasks = tasks_for(experiment, args.trials, seed, (offset,))
         label = "%s %s mm" % (experiment, ("%g" % offset)) if experiment == COUPLE else experiment
-        records = run_sweep(tasks, args.results, args.jobs or None, args.nice, label=label, overrides=overrides)
+        with make_executor(args.cluster, args.jobs or None, args.nice) as executor:
+            records = run_sweep(tasks, args.results, label=label, overrides=overrides, executor=executor)
     except ConfigError as e:
         return _fail(prog, str(e))
     except KeyboardInterrupt:

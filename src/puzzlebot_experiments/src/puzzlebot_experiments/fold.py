@@ -5,7 +5,7 @@ slopes up from the robot already on the floor, and the two close towards
 each other over the coupling. In the model, that fold stops where the
 bodies' top edges meet or where the anchor stops pitching in its holder.
 Beyond that point the top corners become a fulcrum that levers the anchor
-out (docs/sim.md, "Why the chain is a beam"). How far the real robots fold
+out (notes/sim-trials.md, "Why the chain is a beam"). How far the real robots fold
 is not in the sources, so it is one of the things to measure on them
 (docs/lab-measurements.md, item 3).
 
@@ -23,7 +23,7 @@ from typing import Optional
 import pybullet as pb
 
 from puzzlebot_sim.coupling import HEAD_INSERTED
-from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams
 from puzzlebot_experiments.trials import mated_pair
 from puzzlebot_sim.world import SimWorld
 
@@ -96,7 +96,8 @@ def _fold(w):
     return _pitch(w.pose("o")) - _pitch(w.pose("a"))
 
 
-def measure_concave_fold(robot=RobotParams(), anchor=AnchorParams(), loads=FoldLoads(), physics_rate=200):
+def measure_concave_fold(robot=RobotParams(), anchor=AnchorParams(), loads=FoldLoads(),
+                         physics_rate=SimParams.physics_rate):
     """Fold of a coupled pair of ``robot`` (with ``anchor``) under ``loads``; see the module's docstring."""
     anchor.check_fits(robot)
     held = {"fold": [], "pitch": [], "coupled": False}

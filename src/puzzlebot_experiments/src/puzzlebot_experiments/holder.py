@@ -20,7 +20,7 @@ from typing import Tuple
 
 import pybullet as pb
 
-from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams
+from puzzlebot_sim.params import AnchorParams, AnchorRestParams, RobotParams, SimParams
 from puzzlebot_sim.world import RobotStart, SimWorld
 
 # the paper's holder (facts.md, "anchor freedom in its holder"): rad, m, m, rad
@@ -139,22 +139,22 @@ def _on_head(force):
     return push
 
 
-def holder_yaw(robot, anchor, pulled_out, sign, loads=HolderLoads(), physics_rate=200):
+def holder_yaw(robot, anchor, pulled_out, sign, loads=HolderLoads(), physics_rate=SimParams.physics_rate):
     """Yaws [rad] of the anchor base relative to its robot under ``sign`` x ``yaw_torque``, one per start."""
     f = -loads.seat_force if pulled_out else loads.seat_force
     push = _on_base([f, 0, 0], [0, 0, sign * loads.yaw_torque])
     return [pose[5] for pose in _settled(robot, anchor, loads, physics_rate, push)]
 
 
-def holder_pitch(robot, anchor, head_up, loads=HolderLoads(), physics_rate=200):
+def holder_pitch(robot, anchor, head_up, loads=HolderLoads(), physics_rate=SimParams.physics_rate):
     """Pitches [rad] of the anchor base relative to its robot, pulled out, the head pushed up or down,
     one per start."""
     fz = loads.head_force if head_up else -loads.head_force
     return [pose[4] for pose in _settled(robot, anchor, loads, physics_rate, _on_head([-loads.pitch_pull, 0, fz]))]
 
 
-def measure_holder_play(robot=RobotParams(), anchor=AnchorParams(), loads=HolderLoads(), physics_rate=200,
-                        progress=None):
+def measure_holder_play(robot=RobotParams(), anchor=AnchorParams(), loads=HolderLoads(),
+                        physics_rate=SimParams.physics_rate, progress=None):
     """HolderPlay of ``anchor`` in ``robot``'s holder (ten loads, each after every start).
 
     ``progress``: optional callable taking a short text, called before each load.

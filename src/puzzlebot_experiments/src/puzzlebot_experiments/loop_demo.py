@@ -67,14 +67,11 @@ class DemoSettings:
     hold_tolerance: float = 0.001     # m, go_to_goal tolerance: the robots keep regulating for the leg
     reach_tolerance: float = 0.005    # m, a goal is reached within this distance (the stack's default)
     settle_s: float = 2.0             # s, steady error = mean distance over the last settle_s of a leg
-    physics_rate: int = 200           # Hz, Bullet step (sim.yaml)
-    pose_rate: int = 100              # Hz, mocap (sim.yaml)
     wheel_imbalance: float = 0.03     # -, sim: right wheel x (1 + k), left x (1 - k)
     mocap_position_std: float = 0.0005  # m
     mocap_yaw_std: float = 0.005      # rad
     mocap_dropout: float = 0.01       # -, probability that a pose sample is lost
     mocap_heading_offset: float = 0.05  # rad, marker frame yaw - body yaw
-    pair_epsilon: float = 0.003       # m, MPC pair status margin in Bullet (sim.launch)
     couple_trials: int = 6            # coupling trials per seed (two robots with anchors)
     couple_timeout: float = 40.0      # s, simulated
     couple_gap: float = 0.085         # m, start distance of the two robots' centres along x (paper: 65 mm)
@@ -87,12 +84,10 @@ class DemoSettings:
 
     def check(self, where="demo"):
         require_positive(self, ["robots", "legs", "record_legs", "leg_s", "leg_min", "leg_max", "area",
-                                "hold_tolerance", "reach_tolerance", "settle_s", "physics_rate", "pose_rate",
-                                "couple_timeout", "couple_gap"], where)
+                                "hold_tolerance", "reach_tolerance", "settle_s", "couple_timeout", "couple_gap"],
+                        where)
         if self.leg_min > self.leg_max or self.leg_max > 2 * self.area:
             raise ConfigError("%s: need leg_min <= leg_max <= 2 area" % where)
-        if self.physics_rate % self.pose_rate or self.pose_rate % 10:
-            raise ConfigError("%s: physics_rate must be a multiple of pose_rate, pose_rate of 10 Hz" % where)
         if self.settle_s >= self.leg_s:
             raise ConfigError("%s.settle_s must be shorter than leg_s" % where)
 
@@ -102,6 +97,7 @@ class Config:
     demo: DemoSettings
     injected: object          # effects.ActuatorModel applied by the simulation's ActuatorPlant
     true_model: object        # effects.ActuatorModel: everything injected, in model terms (the reference)
+    sim: object               # puzzlebot_sim.config.SimConfig: the robot, anchor and rates as sim.launch has them
 
 
 def config_path(name="loop_demo.yaml"):
@@ -112,8 +108,10 @@ def config_path(name="loop_demo.yaml"):
 
 
 def load_config(path=None, overrides=None):
-    """Config from loop_demo.yaml: ``demo`` (DemoSettings) and ``injected`` (a model.yaml mapping)."""
+    """Config from loop_demo.yaml: ``demo`` (DemoSettings) and ``injected`` (a model.yaml mapping), with
+    the simulation as sim.launch builds it (puzzlebot_sim.config; the demo's own mocap effects)."""
     from puzzlebot_common.effects import ActuatorModel
+    from puzzlebot_sim.config import load_sim_config
 
     path = path or config_path()
     data = load_yaml(path)
@@ -121,42 +119,45 @@ def load_config(path=None, overrides=None):
         raise ConfigError("%s: expected the keys 'demo' and 'injected'" % path)
     demo = DemoSettings.from_dict(dict(data.get("demo") or {}, **(overrides or {})), where="%s: demo" % path)
     injected = ActuatorModel.from_dict(data.get("injected"), where="%s: injected" % path)
-    return Config(demo, injected, true_model(demo, injected))
+    sim = load_sim_config()
+    return Config(demo, injected, true_model(demo, injected, sim.robot), sim)
 
 
-def true_model(demo, injected):
+def true_model(demo, injected, robot):
     """The injected effects as an actuator model: the plant's effects, the wheel imbalance as a yaw-rate
     bias (right x (1 + k), left x (1 - k) turns by 2 k v / wheel base; the change of v, k w b / 2, is
     negligible), the mocap heading offset. Whatever the simulated robot itself adds to a unicycle (e.g.
-    the ~30 ms of its torque-limited wheels) is not in it: nobody declared it."""
+    the ~30 ms of its torque-limited wheels) is not in it: nobody declared it. ``robot``: the simulated
+    robot's RobotParams."""
     from puzzlebot_common.effects import ActuatorModel
-    from puzzlebot_sim.params import RobotParams
 
     model = ActuatorModel.from_dict(injected.to_dict())
     if demo.wheel_imbalance:
-        w_per_v = model.param("w_per_v") + 2.0 * demo.wheel_imbalance / RobotParams().wheel_base
+        w_per_v = model.param("w_per_v") + 2.0 * demo.wheel_imbalance / robot.wheel_base
         model.add("yaw_rate_bias", {"w_per_v": w_per_v, "w0": model.param("w0")})
     if demo.mocap_heading_offset:
         model.add("heading_offset", {"offset_rad": model.param("offset_rad") + demo.mocap_heading_offset})
     return model
 
 
-def mpc_settings(demo):
+def mpc_settings():
+    """The MPC's settings as sim.launch loads them (mpc.yaml with the simulation's mpc_sim.yaml)."""
     from puzzlebot_mpc.config_files import load_settings
 
-    return replace(load_settings(), pair_epsilon=demo.pair_epsilon)
+    return load_settings(sim=True)
 
 
 # ------------------------------------------------------------------ worlds
-def make_world(demo, injected, starts, seed, anchors):
-    from puzzlebot_sim.params import AnchorParams, RobotParams
+def make_world(cfg, starts, seed, anchors):
+    """A SimWorld of ``cfg.sim``'s robot, anchor and physics rate, with the demo's injected effects."""
     from puzzlebot_sim.mocap import MocapModel
     from puzzlebot_sim.world import SimWorld
 
+    demo = cfg.demo
     mocap = MocapModel(demo.mocap_position_std, demo.mocap_yaw_std, demo.mocap_dropout, demo.mocap_heading_offset)
-    return SimWorld(RobotParams(), starts, physics_rate=demo.physics_rate,
-                    anchor_params=AnchorParams() if anchors else None, seed=seed,
-                    actuator_model=injected if injected.has_effects() else None,
+    return SimWorld(cfg.sim.robot, starts, physics_rate=cfg.sim.sim.physics_rate,
+                    anchor_params=cfg.sim.anchor if anchors else None, seed=seed,
+                    actuator_model=cfg.injected if cfg.injected.has_effects() else None,
                     wheel_imbalance=demo.wheel_imbalance, mocap=mocap)
 
 
@@ -273,10 +274,10 @@ def tracking_run(cfg, model, seed, legs=None, record=False):
     demo = cfg.demo
     legs = legs or demo.legs
     names, starts, goals = tracking_task(seed, demo, legs)
-    settings = mpc_settings(demo)
+    settings = mpc_settings()
     loop = ControlLoop(names, settings, actuator_model=model)
-    with make_world(demo, cfg.injected, starts, seed, anchors=False) as world:
-        ls = Lockstep(world, loop, names, settings.dt, demo.pose_rate, record)
+    with make_world(cfg, starts, seed, anchors=False) as world:
+        ls = Lockstep(world, loop, names, settings.dt, cfg.sim.sim.pose_rate, record)
         steps = int(round(demo.leg_s / settings.dt))
         for k in range(legs):
             t0 = round(world.time, 9)
@@ -336,12 +337,12 @@ def coupling_trial(cfg, model, seed, trial, trials):
     names = ["pz1", "pz2"]      # named like the tracking robots: each has its own injected and identified model
     starts = [RobotStart(names[0], 0.0, 0.0, float(rng.uniform(-demo.couple_yaw, demo.couple_yaw))),
               RobotStart(names[1], -demo.couple_gap, offset, float(rng.uniform(-demo.couple_yaw, demo.couple_yaw)))]
-    settings = mpc_settings(demo)
+    settings = mpc_settings()
     loop = ControlLoop(names, settings, actuator_model=model)
     result = {"seed": seed, "trial": trial, "offset_mm": 1e3 * offset, "coupled": False, "time_s": float("nan"),
               "physical": False, "message": ""}
-    with make_world(demo, cfg.injected, starts, seed * 1000 + trial, anchors=True) as world:
-        ls = Lockstep(world, loop, names, settings.dt, demo.pose_rate)
+    with make_world(cfg, starts, seed * 1000 + trial, anchors=True) as world:
+        ls = Lockstep(world, loop, names, settings.dt, cfg.sim.sim.pose_rate)
         ls.settle(settings.dt)
         rid = loop.request(BehaviorRequest(COUPLE, names, target="line", timeout=demo.couple_timeout),
                            round(world.time, 9))
@@ -439,7 +440,8 @@ COLORS = {PLAIN: "tab:red", IDENTIFIED: "tab:blue", TRUE: "tab:green", CLEAN: "0
 
 def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
     """(a) true paths and (b) distance to goal of one robot under each controller; (c) summary bars;
-    (d) time to couple of every coupling trial."""
+    (d) time to couple of every coupling trial. Two panels a row (readable at a page's width); the
+    injected and identified models written out below the panels, one line per robot."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -449,7 +451,10 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
     shown = [(k, lab) for k, lab in labels if k in COLORS and runs.get(k)]
     first = {k: runs[k][0] for k, _ in shown}
     name = sorted(first[PLAIN]["truth"])[0]
-    fig, ax = plt.subplots(1, 4 if trials else 3, figsize=(20 if trials else 16, 4.8))
+    fig, grid = plt.subplots(2, 2, figsize=(12, 9.5))
+    ax = grid.ravel()
+    if not trials:
+        ax[3].axis("off")
     goals = np.asarray(first[PLAIN]["goals"][name])
     style = {PLAIN: ("-", 1.2), TRUE: ("-", 2.2), IDENTIFIED: ("--", 1.2)}
     for k in (PLAIN, TRUE, IDENTIFIED):            # the identified model dashed over the true one
@@ -457,7 +462,7 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
         p = np.asarray(first[k]["truth"][name])
         ls, lw = style[k]
         ax[0].plot(p[:, 1], p[:, 2], color=COLORS[k], ls=ls, lw=lw, label=lab)
-        t = np.arange(p.shape[0]) / demo.pose_rate
+        t = np.arange(p.shape[0]) / cfg.sim.sim.pose_rate
         leg = np.minimum((t / demo.leg_s).astype(int), len(goals) - 1)
         d = np.linalg.norm(p[:, 1:3] - goals[leg], axis=1)
         ax[1].semilogy(t, np.maximum(1e3 * d, 0.05), color=COLORS[k], ls=ls, lw=lw, label=lab)
@@ -485,7 +490,7 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
                   color=COLORS[k], label=lab)
     ax[2].axhline(1e3 * demo.reach_tolerance, color="k", ls=":", lw=0.8)
     ax[2].set_xticks(x)
-    ax[2].set_xticklabels([label for _, label in keys], fontsize=8)
+    ax[2].set_xticklabels([label for _, label in keys], fontsize=9)
     ax[2].set_title("(c) seeds %s: every robot and goal" % ", ".join(str(r["seed"]) for r in runs[PLAIN]),
                     fontsize=10)
     ax[2].legend(fontsize=8)
@@ -499,13 +504,14 @@ def figure(path, runs, summary, labels, cfg, identified_model, trials=None):
             ax[3].plot(x[~fail], tt[~fail], "o", ms=4, color=COLORS[k], alpha=0.7)
             ax[3].plot(x[fail], np.full(fail.sum(), demo.couple_timeout), "x", ms=7, color=COLORS[k])
         ax[3].set_xticks(range(len(keys)))
-        ax[3].set_xticklabels([dict(shown)[k].replace(" (", "\n(") for k in keys], fontsize=7)
+        ax[3].set_xticklabels([dict(shown)[k].replace(" (", "\n(") for k in keys], fontsize=9)
         ax[3].set_ylabel("time to couple [s] (x: not coupled and seated)")
         ax[3].set_title("(d) two robots couple with their anchors: %d trials each" % len(trials[PLAIN]),
                         fontsize=10)
-    fig.suptitle("injected: %s\nidentified: %s" % (describe_model(cfg.true_model), describe_model(identified_model)),
-                 fontsize=9)
-    fig.tight_layout()
+    models = ["injected: " + line for line in describe_model(cfg.true_model).split(" | ")]
+    models += ["identified: " + line for line in describe_model(identified_model).split(" | ")]
+    fig.tight_layout(rect=(0, 0.03 * len(models) / 2 + 0.02, 1, 1))
+    fig.text(0.01, 0.005, "\n".join(models), fontsize=8, va="bottom", family="monospace")
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -527,7 +533,7 @@ def clean_config(cfg):
     from puzzlebot_common.effects import ActuatorModel
 
     demo = replace(cfg.demo, wheel_imbalance=0.0, mocap_heading_offset=0.0)
-    return Config(demo, ActuatorModel(), ActuatorModel())
+    return Config(demo, ActuatorModel(), ActuatorModel(), cfg.sim)
 
 
 def variants(cfg, identified, clean=True, ablation=False):

@@ -28,6 +28,8 @@ PAPER_DECOUPLE_MEAN_S = 7.02
 GOAL_COUPLE_RATE = 0.99          # issue goals: every offset 0-30 mm
 GOAL_DECOUPLE_RATE = 1.0
 GOAL_DECOUPLE_MEAN_S = 4.0
+#: s, chain_step_trial's default timeout (records written before it recorded its own: timeout_s)
+CHAIN_TIMEOUT_S = 30.0
 
 
 def by_offset(records):
@@ -99,6 +101,28 @@ def bench_table(bench):
             fails += r["failures"] if r else 0
         rows.append("| %d | %s | %d |" % (n, " | ".join(cells), fails))
     return "\n".join(rows)
+
+
+def bench_summary(bench, period_ms=100.0, paper_robots=8, horizon=10):
+    """The prose figures beside the MPC time table, from the same JSON (never typed by hand): the
+    paper's largest size and the largest one measured at Hm = ``horizon``, as shares of the control
+    period, and the failures of every configuration."""
+    res = bench.get("results", [])
+    cell = {(r["robots"], r["horizon"]): r for r in res}
+    fails = sum(r["failures"] for r in res)
+    largest = max((r["robots"] for r in res if r["horizon"] == horizon), default=None)
+    parts = []
+    for n, what in ((paper_robots, "At the paper's largest size, %d robots with Hm = %d," % (paper_robots, horizon)),
+                    (largest, "With %s robots," % largest)):
+        r = cell.get((n, horizon))
+        if r is not None:
+            parts.append("%s one step takes %.1f ms median (p95 %.1f ms, max %.1f ms): %.0f %% of the %.0f ms "
+                         "control period." % (what, r["median_ms"], r["p95_ms"], r["max_ms"],
+                                              100 * r["median_ms"] / period_ms, period_ms))
+    parts.append("%s (%d configurations, %d steps each)." % (
+        "Every configuration solved every step" if fails == 0 else "%d failed steps in all" % fails, len(res),
+        bench.get("steps", 0)))
+    return "\n".join(parts)
 
 
 def force_table(summary):
@@ -190,17 +214,32 @@ def couple_figure(records, path):
 
 
 def decouple_figure(records, path):
+    """Left: histogram of the decoupling times with their median and mean (the times are bimodal: most
+    free on the first swing, the rest after a reseat or more; the mean alone misleads). Right: their
+    empirical CDF (share of trials decoupled by a time), the paper's mean and the goal marked."""
     plt = _plt()
-    times = [r["time_s"] for r in records if r["success"] and r.get("time_s") is not None]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    if times:
-        ax.hist(times, bins=np.arange(0, max(times) + 1.0, 0.5), color="C0", alpha=0.8,
-                label="this stack: mean %.2f s" % np.mean(times))
-    ax.axvline(PAPER_DECOUPLE_MEAN_S, color="C3", ls="--", label="paper: mean 7.02 s")
-    ax.axvline(GOAL_DECOUPLE_MEAN_S, color="C2", ls=":", label="goal: mean <= 4 s")
-    ax.set_xlabel("decoupling time [s]")
-    ax.set_ylabel("trials")
-    _finish(fig, (ax,), path)
+    times = np.sort([r["time_s"] for r in records if r["success"] and r.get("time_s") is not None])
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    if len(times):
+        a1.hist(times, bins=np.arange(0, times[-1] + 1.0, 0.5), color="C0", alpha=0.8,
+                label="this stack (%d decoupled)" % len(times))
+        a1.axvline(np.median(times), color="k", ls="-", label="median %.2f s" % np.median(times))
+        a1.axvline(np.mean(times), color="C1", ls="-.", label="mean %.2f s" % np.mean(times))
+        a2.step(np.concatenate([[0.0], times]), np.arange(len(times) + 1) / len(records) * 100.0, where="post",
+                color="C0", label="this stack: %d of %d trials" % (len(times), len(records)))
+        for q in (50, 90):
+            t = np.percentile(times, q)
+            a2.plot([t], [q * len(times) / len(records)], "o", color="k", ms=4)
+            a2.annotate("%d %%: %.1f s" % (q, t), (t, q * len(times) / len(records)), textcoords="offset points",
+                        xytext=(6, -10), fontsize=8)
+    for ax in (a1, a2):
+        ax.axvline(PAPER_DECOUPLE_MEAN_S, color="C3", ls="--", label="paper: mean 7.02 s")
+        ax.axvline(GOAL_DECOUPLE_MEAN_S, color="C2", ls=":", label="goal: mean <= 4 s")
+        ax.set_xlabel("decoupling time [s]")
+    a1.set_ylabel("trials")
+    a2.set_ylabel("decoupled by then [% of trials]")
+    a2.set_ylim(0, 102)
+    _finish(fig, (a1, a2), path)
 
 
 def bench_figure(bench, path):
@@ -223,7 +262,8 @@ def force_figure(d, fwd, back, path):
     fig, ax = plt.subplots(figsize=(6, 3.5))
     ax.plot(d, fwd, label="pushed in (forward)")
     ax.plot(d, back, label="pulled back")
-    ax.axhspan(0.5, 0.7, xmin=0, xmax=1, color="C1", alpha=0.08, label="paper: 0.5-0.7 N back at 4 mm")
+    ax.errorbar([4.0], [0.6], yerr=[[0.1], [0.1]], fmt="none", ecolor="C1", elinewidth=6, alpha=0.5, capsize=0,
+                label="paper: 0.5-0.7 N back at 4 mm")
     ax.axhline(0.2, color="C0", ls=":", label="paper: forward peak < 0.2 N")
     ax.set_xlabel("probe displacement [mm]")
     ax.set_ylabel("force [N]")
@@ -231,7 +271,8 @@ def force_figure(d, fwd, back, path):
 
 
 def chain_figure(records, path):
-    """Left: per seed, when the first pair came apart (marker: which pair) or when the chain was down.
+    """Left: per seed, when the first pair came apart (marker: which pair), when the chain was down, or
+    (grey) that it stayed intact but not every robot was down when the trial's time ran out.
     Right: the separating pair's largest barb angle against the snap angle (beyond it the barbs fold
     and the anchor comes out through the force profile)."""
     plt = _plt()
@@ -247,6 +288,14 @@ def chain_figure(records, path):
     down = [(r["seed"], r["time_s"]) for r in recs if r["success"] and r.get("time_s") is not None]
     if down:
         a1.plot([p[0] for p in down], [p[1] for p in down], "o", ms=9, color="C2", label="all down, intact")
+    stuck = [r for r in recs if not r["success"] and not r.get("first_separation")]
+    if stuck:                  # intact, but not every robot on the floor when the trial's time ran out
+        a1.plot([r["seed"] for r in stuck], [r.get("timeout_s", CHAIN_TIMEOUT_S) for r in stuck], "v", ms=9,
+                color="0.4", label="intact, not all down in time")
+        for r in stuck:
+            a1.annotate("%d/%d on the floor" % (r.get("upright_on_floor", 0), r.get("robots", 3)),
+                        (r["seed"], r.get("timeout_s", CHAIN_TIMEOUT_S)), textcoords="offset points",
+                        xytext=(0, -16), ha="center", fontsize=7, color="0.3")
     a1.set_xlabel("seed")
     a1.set_ylabel("time from the start [s]")
     a1.set_xticks(seeds)

@@ -29,7 +29,7 @@ import pybullet as pb
 
 from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
-from puzzlebot_sim.params import AnchorParams, RobotParams
+from puzzlebot_sim.params import AnchorParams, RobotParams, SimParams
 from puzzlebot_sim.urdf import URDF_FLAGS, anchor_urdf
 
 STEP_MM = 0.1           # probe step (paper)
@@ -55,8 +55,9 @@ class ForceProfile:
 class ForceRig(BulletSession):
     """The rig in its own physics client (DIRECT)."""
 
-    def __init__(self, robot_params=RobotParams(), anchor_params=AnchorParams(), physics_rate=200,
-                 solver_iterations=15, erp=0.2, settle_s=0.05):
+    def __init__(self, robot_params=RobotParams(), anchor_params=AnchorParams(),
+                 physics_rate=SimParams.physics_rate, solver_iterations=SimParams.solver_iterations,
+                 erp=SimParams.erp, settle_s=0.05):
         self.rp, self.ap = robot_params, anchor_params
         self.dt = 1.0 / physics_rate
         self.settle_steps = max(1, int(round(settle_s * physics_rate)))

@@ -20,7 +20,7 @@ A trial succeeds when every step does; it stops at the first failed step.
 import numpy as np
 
 from puzzlebot_common.robots import parse_robot_list
-from puzzlebot_mpc.behaviors import STATE_NAMES, SUCCEEDED, BehaviorRequest
+from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
 from puzzlebot_sim.coupling import HEAD_ALIGNED, HEAD_INSERTED
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
@@ -81,7 +81,11 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
         for step in sc.steps:
             req = request_of(step)
             limit = (step.timeout or 60.0) + SETTLE
-            state, message, elapsed = cl.run_behavior(req, limit)
+            t0 = cl.time
+            try:
+                state, message, elapsed = cl.run_behavior(req, limit)
+            except RuntimeError as e:          # a pose the pose gate rejects (a robot fell off a stage): the
+                state, message, elapsed = FAILED, "pose rejected: %s" % e, cl.time - t0    # trial fails there
             coupled = sorted(cl.loop.pairs.coupled)
             problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
             step_ok = state == SUCCEEDED and not problems
@@ -134,6 +138,17 @@ def format_table(summary):
     return "\n".join(rows)
 
 
+def failure_text(reason, width=95):
+    """A step's failure reason for the timeline: the behaviour's "timeout after 90.00 s; not coupled: ..."
+    as "timeout (90 s): not coupled: ...", whole words, at most ``width`` characters."""
+    import re
+
+    text = re.sub(r"^timeout after ([0-9.]+) s; ", lambda m: "timeout (%g s): " % float(m.group(1)), str(reason))
+    if len(text) > width:
+        text = text[:width].rsplit(" ", 1)[0].rstrip(",;:") + " ..."
+    return text
+
+
 def plot_trials(records, scenario_steps, path, title=""):
     """PNG timeline: one row per trial, one bar per step it reached (length: simulated seconds), green
     when the step succeeded and Bullet agreed, red when it did not, with the reason next to it (the
@@ -154,8 +169,8 @@ def plot_trials(records, scenario_steps, path, title=""):
                     hatch=hatches[k % len(hatches)], edgecolor="white", linewidth=0.5)
             t += st["sim_seconds"]
             if not st["ok"]:
-                why = st["problems"][0] if st["problems"] else st.get("message", st["state"])[:60]
-                ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3")
+                why = failure_text(st["problems"][0] if st["problems"] else st.get("message", st["state"]))
+                ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3", clip_on=False)
         t_max = max(t_max, t)
     handles = [Patch(facecolor="0.6", hatch=hatches[k % len(hatches)], edgecolor="white",
                      label="%d. %s" % (k + 1, step.describe())) for k, step in enumerate(scenario_steps)]

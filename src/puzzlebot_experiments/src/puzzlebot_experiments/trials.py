@@ -328,7 +328,8 @@ def chain_step_trial(seed, n=3, speed=0.05, stage_height=0.05, timeout=30.0, dir
         return {"trial": "chain_step", "seed": seed, "robots": n, "direction": direction, "pilot": pilot,
                 "success": bool(all(down) and not decoupled), "upright_on_floor": sum(down),
                 "pairs_ever_decoupled": len(decoupled),
-                "time_s": round(w.time - t0, 2) if all(down) else None, "first_separation": first}
+                "time_s": round(w.time - t0, 2) if all(down) else None, "timeout_s": timeout,
+                "first_separation": first}
 
 
 

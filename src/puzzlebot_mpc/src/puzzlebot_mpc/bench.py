@@ -8,15 +8,20 @@ control step goes through ControlLoop.step: pair bookkeeping, behaviour
 objectives, the MPC solve. The step time is the wall time of that call;
 the first step (it builds the problem for the pair structure and starts
 cold) is reported separately as ``first_step_ms`` and not in the
-statistics. ``solver_median_ms`` is the part of the step spent inside the QP
-solver (Clarabel: set-up, data update, interior-point iterations); the rest
-is Python (pair bookkeeping, objectives, QP assembly, rollout).
+statistics. ``mpc_median_ms`` is the part of the step spent in the MPC
+(MultiRobotMPC.make_step: QP assembly, solve, rollout), ``solver_median_ms``
+the part of that spent inside the QP solver (the active set's working sets,
+or Clarabel's set-up, data update and iterations); the rest of the step is
+the control loop's (pair bookkeeping, behaviour objectives). ``fallbacks``
+counts the steps in which a QP of the active set was solved by Clarabel.
 
 The grid (``make bench``) runs N in GRID_ROBOTS at Hm = 10 and, up to 32
-robots, at Hm = 3 and 5; then the same N = 8, Hm = 10 run with IPOPT on the
-full NLP (the lab's kind of solver, built once here) for comparison; it
-prints the tables and the issue's targets (TARGETS) met or not, writes the
-JSON and, with ``--page``, rewrites the generated block of docs/mpc.md.
+robots, at Hm = 3 and 5; then, interleaved with the default solver's runs
+at N in SOLVER_REFERENCE, the same runs with Clarabel (the interior point),
+and the N = 8, Hm = 10 run with IPOPT on the full NLP (the lab's kind of
+solver, built once here) for comparison; it prints the tables and the
+issue's targets (TARGETS) met or not, writes the JSON and, with ``--page``,
+rewrites the generated block of docs/mpc.md.
 
     python -m puzzlebot_mpc.bench --robots 8 --horizon 10 --json
     python -m puzzlebot_mpc.bench --grid --out build/bench/mpc_bench.json --page docs/mpc.md
@@ -39,6 +44,7 @@ from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc.behaviors import DRIVE_ASSEMBLY, BehaviorRequest
 from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.control_loop import ControlLoop
+from puzzlebot_mpc.controller import SOLVERS
 from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.pairs import ANCHOR, coupling_polygon, head_margin, make_pair
 
@@ -46,6 +52,7 @@ GRID_ROBOTS = (2, 4, 6, 8, 16, 32, 64, 128, 256)
 GRID_HORIZONS = (3, 5, 10)
 GRID_SHORT_MAX = 32   # Hm = 3 and 5 up to this many robots; Hm = 10 for every N
 REFERENCE = (8, 10)   # (robots, Hm) of the IPOPT comparison
+SOLVER_REFERENCE = (8, 128)   # robots (Hm = 10) run again with Clarabel, right after the default solver's run
 #: decomposition runs: (robots, chains side by side) at Hm = 10, each as one joint QP, as separate QPs, two threads
 DECOMPOSITION = ((32, 8), (128, 4))
 DECOMPOSITION_MODES = (("one joint QP", dict(decompose=False)), ("separate QPs", dict(decompose=True)),
@@ -96,9 +103,9 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
         loop.on_pose(name, t, *p)
     loop.request(BehaviorRequest(DRIVE_ASSEMBLY, [names[0]], velocities=[(DRIVE_V, DRIVE_W)],
                                  timeout=(steps + 5) * s.dt), t)
-    times, failures, first_ms, lost = [], 0, None, 0
+    times, failures, first_ms, lost, fallbacks = [], 0, None, 0, 0
     min_margin = math.inf
-    qp_iterations, solver_ms = [], []
+    qp_iterations, solver_ms, mpc_ms = [], [], []
     for k in range(steps + 1):
         if k == steps // 2 + 1:        # second half of the S-curve
             loop.request(BehaviorRequest(DRIVE_ASSEMBLY, [names[0]], velocities=[(DRIVE_V, -DRIVE_W)],
@@ -112,6 +119,8 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
             times.append(ms)
             qp_iterations.append(out.result.iterations)
             solver_ms.append(out.result.extra.get("solver_ms", float("nan")))
+            mpc_ms.append(out.result.solve_time_ms)
+            fallbacks += "fallback" in out.result.status
         failures += 0 if out.result.success else 1
         lost += len(out.lost or [])
         sub = s.dt / PLANT_SUBSTEPS
@@ -139,7 +148,9 @@ def run(robots, horizon, constraint_horizon=3, steps=50, settings=None, solver=N
             "min_pip_margin_mm": round(1e3 * min_margin, 2), "lead_moved_m": round(lead_moved, 3),
             "qp_iterations_median": float(np.median(qp_iterations)),
             "solver_median_ms": round(float(np.median(solver_ms)), 3),
-            "solver_p95_ms": round(float(np.percentile(solver_ms, 95)), 3)}
+            "solver_p95_ms": round(float(np.percentile(solver_ms, 95)), 3),
+            "mpc_median_ms": round(float(np.median(mpc_ms)), 3),
+            "mpc_p95_ms": round(float(np.percentile(mpc_ms, 95)), 3), "fallbacks": fallbacks}
 
 
 def couple_trials(robots, trials, seed=0, timeout=120.0, settings=None):
@@ -214,20 +225,40 @@ def table(results):
 
 
 def solver_table(results, horizon=10):
-    """Markdown table at one Hm: step median / p95, the solver's part of it, QP iterations, failures, lost pairs."""
-    lines = ["| N | step median / p95 [ms] | in the QP solver: median [ms] | QP iterations | build [s] "
-             "| failures | pairs lost |", "|---|---|---|---|---|---|---|"]
+    """Markdown table at one Hm: step median / p95, the MPC's and the solver's part of it, QP iterations,
+    Clarabel fallbacks, failures, lost pairs."""
+    lines = ["| N | step median / p95 [ms] | in the MPC: median / p95 [ms] | in the QP solver: median [ms] "
+             "| QP iterations | steps with a fallback | build [s] | failures | pairs lost |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in sorted((r for r in results if r["horizon"] == horizon), key=lambda r: r["robots"]):
-        lines.append("| %d | %.1f / %.1f | %.1f | %g | %.3f | %d | %d |" % (
-            r["robots"], r["median_ms"], r["p95_ms"], r.get("solver_median_ms", float("nan")),
-            r["qp_iterations_median"], r["build_s"], r["failures"], r["pairs_lost"]))
+        lines.append("| %d | %.1f / %.1f | %.1f / %.1f | %.1f | %g | %d | %.3f | %d | %d |" % (
+            r["robots"], r["median_ms"], r["p95_ms"], r.get("mpc_median_ms", float("nan")),
+            r.get("mpc_p95_ms", float("nan")), r.get("solver_median_ms", float("nan")),
+            r["qp_iterations_median"], r.get("fallbacks", 0), r["build_s"], r["failures"], r["pairs_lost"]))
     return "\n".join(lines)
 
 
+def solver_comparison_table(results, clarabel):
+    """The default solver against Clarabel, the same N run right after each other."""
+    name = results[0].get("solver", "default") if results else "default"
+    rows = ["| N, Hm | %s: step median / p95 [ms] | Clarabel: step median / p95 [ms] | in the solver: %s / "
+            "Clarabel, median [ms] | QP iterations | ratio of step medians |" % (name, name),
+            "|---|---|---|---|---|---|"]
+    for ref in clarabel:
+        mine = [r for r in results if (r["robots"], r["horizon"]) == (ref["robots"], ref["horizon"])]
+        if mine:
+            m = mine[0]
+            rows.append("| %d, %d | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %g / %g | %.1fx |" % (
+                ref["robots"], ref["horizon"], m["median_ms"], m["p95_ms"], ref["median_ms"], ref["p95_ms"],
+                m["solver_median_ms"], ref["solver_median_ms"], m["qp_iterations_median"],
+                ref["qp_iterations_median"], ref["median_ms"] / m["median_ms"]))
+    return "\n".join(rows)
+
+
 def reference_table(results, reference):
-    """The RTI (Clarabel) against IPOPT on the full NLP, same run and robots."""
-    rows = ["| N, Hm | RTI + Clarabel: median / p95 [ms] | IPOPT, full NLP: median / p95 [ms] | ratio of medians |",
-            "|---|---|---|---|"]
+    """The RTI (the default solver) against IPOPT on the full NLP, same run and robots."""
+    rows = ["| N, Hm | RTI (%s): median / p95 [ms] | IPOPT, full NLP: median / p95 [ms] | ratio of medians |"
+            % (results[0].get("solver", "default") if results else "default"), "|---|---|---|---|"]
     for ref in reference:
         mine = [r for r in results if (r["robots"], r["horizon"]) == (ref["robots"], ref["horizon"])]
         if mine:
@@ -274,6 +305,8 @@ def page_block(doc):
         "(ms; median / p95 of the whole control step)." % (doc["time"], doc["steps"], doc["constraint_horizon"],
                                                           m["cpu_count"], m["load_avg_1_5_15"]),
         table(res), "At Hm = 10, where the time goes:", solver_table(res),
+        "Against Clarabel (each run right after the default solver's):",
+        solver_comparison_table(res, doc.get("clarabel", [])),
         "Against IPOPT on the full NLP (same run):", reference_table(res, doc.get("reference", [])),
         "Independent assemblies (chains side by side, the first drives):",
         decomposition_table(doc.get("decomposition", [])),
@@ -302,7 +335,7 @@ def main(argv=None):
     ap.add_argument("--horizon", type=int, default=10, help="prediction horizon Hm")
     ap.add_argument("--constraint-horizon", type=int, default=3, help="constraint horizon Hc <= Hm")
     ap.add_argument("--steps", type=int, default=50, help="control steps measured (>= 50 for the table)")
-    ap.add_argument("--solver", choices=("clarabel", "ipopt"), default=None, help="override mpc.yaml's solver")
+    ap.add_argument("--solver", choices=SOLVERS, default=None, help="override mpc.yaml's solver")
     ap.add_argument("--assemblies", type=int, default=1,
                     help="one configuration: the robots form this many chains side by side; the first drives")
     ap.add_argument("--solver-threads", type=int, default=None, help="override mpc.yaml's solver_threads")
@@ -347,11 +380,15 @@ def main(argv=None):
             ap.error("--grid-robots: a comma list of robot counts, got %r" % args.grid_robots)
         if min(robots) < 2:
             ap.error("--grid-robots: every N must be >= 2")
-    results, reference = [], []
+    results, reference, clarabel = [], [], []
     for n, h in grid(robots):
         r = run(n, h, args.constraint_horizon, args.steps, settings=settings, solver=args.solver)
         print(json.dumps(r), flush=True)
         results.append(r)
+        if h == 10 and n in SOLVER_REFERENCE and r["solver"] != "clarabel":
+            c = run(n, h, args.constraint_horizon, args.steps, settings=settings, solver="clarabel")
+            print(json.dumps(c), flush=True)
+            clarabel.append(c)
     if REFERENCE[0] in robots and args.solver != "ipopt":
         r = run(REFERENCE[0], REFERENCE[1], args.constraint_horizon, args.steps, settings=settings, solver="ipopt")
         print(json.dumps(r), flush=True)
@@ -368,7 +405,7 @@ def main(argv=None):
             decomposition.append(r)
     doc = {"benchmark": "puzzlebot_mpc.bench", "machine": machine(), "steps": args.steps,
            "constraint_horizon": args.constraint_horizon, "time": time.strftime("%Y-%m-%d %H:%M:%S"),
-           "results": results, "reference": reference, "decomposition": decomposition}
+           "results": results, "reference": reference, "clarabel": clarabel, "decomposition": decomposition}
     for path in args.out:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         with open(path, "w") as f:
@@ -379,7 +416,7 @@ def main(argv=None):
     print()
     print("MPC step time (ControlLoop.step wall time), chain of N coupled robots driving")
     print(block)
-    return 0 if all(r["failures"] == 0 for r in results + reference) else 1
+    return 0 if all(r["failures"] == 0 for r in results + reference + clarabel) else 1
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_common.pose_gate import PoseGate, PoseGateParams, Verdict
-from puzzlebot_mpc.behaviors import FAILED, RUNNING, BehaviorError, BehaviorManager
+from puzzlebot_mpc.behaviors import FAILED, RUNNING, STOP, BehaviorError, BehaviorManager, BehaviorRequest
 from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
 from puzzlebot_common.model import NX
@@ -161,6 +161,20 @@ class ControlLoop:
         """Ids of the requests waiting to start, in order."""
         return [request_id for request_id, _ in self._pending]
 
+    def cancel(self, request_id, now):
+        """Cancel request ``request_id`` at ``now`` [s]: a queued one leaves the queue ("queued"); the
+        running one is replaced by ``stop`` ("running": every robot comes to rest, the coupled pairs
+        stay held, the requests queued behind it are dropped, as for any request that starts at
+        once). None: it is neither queued nor running (ended, or unknown)."""
+        for k, (rid, _) in enumerate(self._pending):
+            if rid == request_id:
+                del self._pending[k]
+                return "queued"
+        if self.behaviors.request_id == request_id and self.behaviors.state == RUNNING:
+            self.request(BehaviorRequest(STOP), now)
+            return "running"
+        return None
+
     def _start_due(self, now, poses):
         """Start the queued requests that are due (see request)."""
         while self._pending:
@@ -177,6 +191,22 @@ class ControlLoop:
                 self.behaviors.request(req, now, poses, request_id=request_id)
             except BehaviorError as e:
                 self.behaviors.refuse(request_id, req, "refused when due: %s" % e)
+
+    def retune(self, settings, mpc=None):
+        """Use ``settings`` (MPCSettings with the same dt, horizon and solver: puzzlebot_mpc.tuning) from
+        the next step, and ``mpc``: a MultiRobotMPC built for them (see :meth:`build_mpc`) when the change
+        reaches the MPC's problem; None keeps the current one (a change the behaviours read every step)."""
+        self.settings = settings
+        self.behaviors.set_settings(settings)
+        if mpc is not None:
+            self.mpc = mpc
+
+    def build_mpc(self, settings, keys):
+        """A MultiRobotMPC for ``settings``, with the structure of pair slots ``keys`` (pair_keys()) built;
+        slow (CasADi builds the problem): call it outside the node's lock, then :meth:`retune`."""
+        mpc = MultiRobotMPC(settings, len(self.names)).setup()
+        mpc.prepare(keys)
+        return mpc
 
     def pair_keys(self):
         """The current pair slots as robot index tuples (the MPC structure's key)."""

@@ -25,10 +25,14 @@ per-solve overhead), large ones alone (``decompose``), optionally on
 
 Solvers (``settings.solver``):
 
-- ``clarabel`` (default): real-time iteration. Each step linearises the
-  problem at the previous solution shifted by one stage (Gauss-Newton
-  Hessian, linearised dynamics and constraints) and solves that sparse QP
-  with Clarabel's interior-point method. ``sqp_iterations`` QPs per step
+- ``active_set`` (default) and ``clarabel``: real-time iteration. Each step
+  linearises the problem at the previous solution shifted by one stage
+  (Gauss-Newton Hessian, linearised dynamics and constraints) and solves
+  that sparse QP: ``active_set`` by the primal-dual active-set method
+  (puzzlebot_mpc/active_set.py) warm-started with the working set of the
+  last solution, one LDL' factorization per working set (Clarabel on a
+  structure's first QP and on a QP it does not finish); ``clarabel`` by
+  Clarabel's interior-point method. ``sqp_iterations`` QPs per step
   (1 = classic RTI), ``sqp_iterations_cold`` after a cold start.
   The butterfly set is two cones; each stage uses the cone of the previous
   plan's direction of travel. A robot at rest that must move (a goal, an
@@ -54,7 +58,7 @@ from puzzlebot_common.model import NU, NX, euler_step
 from puzzlebot_mpc import qp as qpm
 from puzzlebot_mpc.ocp import Problem, Structure, param_vector
 
-SOLVERS = ("clarabel", "ipopt")
+SOLVERS = ("active_set", "clarabel", "ipopt")
 
 
 @dataclass
@@ -168,23 +172,32 @@ def _clarabel_settings(settings):
     return opts
 
 
+def _finite(*arrays):
+    return all(np.all(np.isfinite(a)) for a in arrays)
+
+
 class _ClarabelQP:
     """One QP of the real-time iteration (a subproblem, or several solved together): its structure
     (qp.QPStructure, built once) and its Clarabel instance (set up at the first solve, then updated)."""
 
-    def __init__(self, settings, st):
-        self.qs = qpm.QPStructure(settings, st)
+    def __init__(self, settings, st, qs=None):
+        self.qs = qs or qpm.QPStructure(settings, st)
         self.lay = self.qs.lay
         self.solver = None
-        self.solver_s = 0.0          # time spent in Clarabel (set-up, update, solve) [s], summed
+        self.last = None             # Clarabel's last solution (primal, slacks s and duals z of the rows)
+        self.solver_s = 0.0          # time spent in the solver (set-up, update, solve) [s], summed
 
     def solve(self, settings, zbar, d):
+        Px, q, Ax, b = self.qs.assemble(zbar, d)
+        if not _finite(Px, q, Ax, b):
+            return None, "non-finite QP data", 0, math.inf
+        return self.solve_data(settings, Px, q, Ax, b)
+
+    def solve_data(self, settings, Px, q, Ax, b):
+        """Solve the assembled QP (solver order); returns (z in the layout's order or None, status,
+        iterations, objective)."""
         import clarabel
 
-        Px, q, Ax, b = self.qs.assemble(zbar, d)
-        if not (np.all(np.isfinite(Px)) and np.all(np.isfinite(q)) and np.all(np.isfinite(Ax))
-                and np.all(np.isfinite(b))):
-            return None, "non-finite QP data", 0, math.inf
         t0 = time.perf_counter()
         if self.solver is None:
             P, A = self.qs.matrices(Px, Ax)
@@ -194,12 +207,94 @@ class _ClarabelQP:
             self.solver.update(P=Px.tolist(), q=q.tolist(), A=Ax.tolist(), b=b.tolist())
         sol = self.solver.solve()
         self.solver_s += time.perf_counter() - t0
+        self.last = sol
         status = str(sol.status)
         ok = status in ("Solved", "AlmostSolved")
         z = self.qs.from_solver(sol.x)
         if ok and not np.all(np.isfinite(z)):
             ok, status = False, status + " (non-finite solution)"
         return (z if ok else None), status, int(sol.iterations), float(sol.obj_val)
+
+    def keep(self, z):
+        """The step chose the solution ``z`` (of the lobe search's tries): nothing to remember."""
+
+    def cost(self, z, d):
+        return self.qs.cost(z, d)
+
+
+class _ActiveSetQP:
+    """One QP of the real-time iteration solved by the primal-dual active-set method
+    (puzzlebot_mpc/active_set.py) on its KKT sparsity, started from the working set of the solution the
+    last step chose. Clarabel solves the QP when there is no such working set yet (its first QP: a cold start from rest
+    changes too many rows at once) and when the active set does not converge within
+    ``active_set_iterations`` working sets (status "... (Clarabel fallback)"); the rows whose dual
+    exceeds their slack in its solution are the next working set."""
+
+    def __init__(self, settings, st):
+        from puzzlebot_mpc.active_set import ActiveSetQP
+
+        self.qs = qs = qpm.QPStructure(settings, st)
+        self.lay = qs.lay
+        self.solver = ActiveSetQP(qs.lay.nz, qs.P_indices, qs.P_indptr, qs.m_general, qs.G_indices, qs.G_indptr,
+                                  qs.n_eq, max_iter=settings.active_set_iterations)
+        if qs.bf_rows.size:          # the two rows of a butterfly cone: both active only at its vertex
+            self.solver.exclusive = qs.bf_rows.reshape(-1, 2)
+        self.fallback = None
+        self.fallbacks = 0
+        self.working = None          # the WorkingSet the next QP starts from
+        self._tried = []             # (z, working set) of this step's solves, for keep()
+        self.solver_s = 0.0
+
+    def solve(self, settings, zbar, d):
+        Px, q, Ax, b = self.qs.assemble(zbar, d)
+        if not _finite(Px, q, Ax, b):
+            return None, "non-finite QP data", 0, math.inf
+        t0 = time.perf_counter()
+        Ag, bg, lb, ub = self.qs.bounded(Ax, b)
+        res = None
+        if self.working is not None:         # cold (no solution yet): the interior point gives the first one
+            res = self.solver.solve(Px, q, Ag, bg, lb, ub, self.working)
+            self.solver_s += time.perf_counter() - t0
+            if res.solved:
+                z = self.qs.from_solver(res.z)
+                self._tried.append((z, res.working))
+                return z, "Solved", res.iterations, res.obj
+            self.fallbacks += 1
+        # not converged: the interior point solves the same QP, its solution gives the working set
+        if self.fallback is None:
+            self.fallback = _ClarabelQP(settings, None, qs=self.qs)
+        before = self.fallback.solver_s
+        z, status, it, obj = self.fallback.solve_data(settings, Px, q, Ax, b)
+        self.solver_s += self.fallback.solver_s - before
+        if z is not None:
+            zs = z[self.qs.vorder]
+            zs[self.qs.slack_solver] = np.maximum(zs[self.qs.slack_solver], 0.0)
+            z = self.qs.from_solver(zs)
+            obj = self.solver.objective(Px, q, zs)     # comparable with the active set's (lobe search)
+            self._tried.append((z, self._working_set_of(self.fallback.last, Ax)))
+        if res is None:
+            return z, status, it, obj
+        return z, status + " (Clarabel fallback)", res.iterations + it, obj
+
+    def _working_set_of(self, sol, Ax):
+        """The working set of an interior-point solution: the rows whose dual exceeds their slack."""
+        from puzzlebot_mpc.active_set import AT_LOWER, AT_UPPER, FREE, WorkingSet
+
+        qs = self.qs
+        on = np.asarray(sol.z) > np.asarray(sol.s)                      # rows in the solver's order
+        bounds = np.full(qs.lay.nz, FREE, np.int8)
+        up = Ax[qs.bound_entry] > 0
+        hit = on[qs.bound_rows]
+        bounds[qs.bound_var[hit & ~up]] = AT_LOWER
+        bounds[qs.bound_var[hit & up]] = AT_UPPER
+        return WorkingSet(on[qs.general[qs.n_eq:]], bounds)
+
+    def keep(self, z):
+        """The step chose the solution ``z`` (None: the step failed): its working set starts the next QP."""
+        for zt, ws in self._tried:
+            if zt is z:
+                self.working = ws
+        self._tried = []
 
     def cost(self, z, d):
         return self.qs.cost(z, d)
@@ -233,6 +328,9 @@ class _IpoptNLP:
         z = np.asarray(sol["x"]).ravel()
         return (z if ok else None), status, int(stats.get("iter_count", 0)), \
             (float(self.cost_fn(z, p)) if ok else math.inf)
+
+    def keep(self, z):
+        """The step chose the solution ``z``: nothing to remember."""
 
     def cost(self, z, d):
         return float(self.cost_fn(z, param_vector(self.prob.par, d)))
@@ -317,7 +415,7 @@ class MultiRobotMPC:
             t0 = time.perf_counter()
             s = self.settings
             st = Structure(len(part.robots), s.horizon, s.constraint_horizon, part.local_pairs)
-            qp = (_IpoptNLP if s.solver == "ipopt" else _ClarabelQP)(s, st)
+            qp = {"ipopt": _IpoptNLP, "clarabel": _ClarabelQP, "active_set": _ActiveSetQP}[s.solver](s, st)
             self.build_seconds += time.perf_counter() - t0
             self._qps[k] = qp
             if len(self._qps) > CACHE_SIZE:
@@ -422,9 +520,11 @@ class MultiRobotMPC:
                 z, status, it, obj = qp.solve(s, zbar, d)
                 qp_iters += it
                 if z is None:
+                    qp.keep(None)
                     return None, status, qp_iters, d
                 if best is None or obj < best[1]:
                     best = (z, obj)
+            qp.keep(best[0])
             zbar = best[0]
         return zbar, status, qp_iters, d
 

@@ -23,6 +23,10 @@ q = 2 J'(r - J zbar) + lin; A z <= b from the linearised rows
 Pair slots that are neither active nor coupled carry zero weights and zero
 rows (``0 - s <= 0``): a pair that changes status, or a robot that joins or
 leaves a slot's pair, changes numbers, never the structure.
+
+Clarabel takes the QP as assembled (``assemble``); the active-set solver
+(active_set.py) takes it with its single-variable rows as bounds
+(``bounded``: lb <= z <= ub and the general rows).
 """
 
 import math
@@ -74,6 +78,11 @@ class StepData:
                         self.vel_on[robots], self.bsign[robots], self.pt_i[slots], self.pt_j[slots],
                         self.act[slots], self.conn[slots], self.head[slots], self.poly_g[slots],
                         self.poly_h[slots], self.yaw_lim[slots], self.yaw_off[slots])
+
+
+def _matvec(M, x):
+    """Batched matrix-vector products: (B, m, k) @ (B, k) -> (B, m)."""
+    return np.matmul(M, x[:, :, None])[:, :, 0]
 
 
 _HALFPLANES = {}
@@ -291,6 +300,44 @@ class QPStructure:
         self.nA = len(rr)
         self._ub_vals = np.ones(len(self.ub_vars))
         self._lb_vals = -np.ones(len(self.lb_vars))
+        self._bound_form(rpos)
+
+    def _bound_form(self, rpos):
+        """The same QP with its single-variable rows (the command's rate limit, the variable bounds) as
+        bounds lb <= z <= ub: ``general`` (solver-order rows kept: the zero cone, butterfly and coupling
+        rows), the CSC pattern of A restricted to them (``G_indices``, ``G_indptr``, ``m_general``), and
+        for each single-variable row its variable and its entry in A's data (``bound_var``,
+        ``bound_entry``); ``slack_solver`` marks the slacks in the solver's order, ``bf_rows`` the butterfly
+        rows (stage, robot, sign) among the general inequality rows."""
+        single = np.zeros(self.m, bool)
+        for name, V, pat, r0 in self._row_blocks:
+            if name.startswith("rate") or name in ("ub", "lb"):
+                single[rpos[r0 + np.arange(V.shape[0] * pat.shape[0])]] = True
+        self.general = np.flatnonzero(~single)
+        keep = ~single[self.A_indices]
+        newrow = np.cumsum(~single) - 1
+        cols = np.repeat(np.arange(self.lay.nz), np.diff(self.A_indptr))
+        self.G_entries = np.flatnonzero(keep)
+        self.G_indices = newrow[self.A_indices[keep]].astype(np.int64)
+        self.G_indptr = np.searchsorted(cols[keep], np.arange(self.lay.nz + 1)).astype(np.int64)
+        self.m_general = len(self.general)
+        srows = np.flatnonzero(single)
+        entry_of_row = np.empty(self.m, np.int64)
+        entry_of_row[self.A_indices] = np.arange(self.nA)      # single rows have exactly one entry
+        self.bound_rows = srows
+        self.bound_entry = entry_of_row[srows]
+        self.bound_var = cols[self.bound_entry]
+        order = np.argsort(self.bound_var, kind="stable")      # the rows of each variable together
+        self._bound_order = order
+        self._bound_vars, self._bound_starts = np.unique(self.bound_var[order], return_index=True)
+        self.slack_solver = self.lay.slack[self.vorder]
+        general_of = np.full(self.m, -1)
+        general_of[self.general] = np.arange(self.m_general)
+        self.bf_rows = np.zeros((0, 0, 2), int)   # (H+1, n, 2): the butterfly rows among the inequality rows
+        for name, V, pat, r0 in self._row_blocks:
+            if name == "bf":
+                r = r0 + np.arange(V.shape[0] * 2).reshape(self.st.horizon + 1, self.st.n, 2)
+                self.bf_rows = general_of[rpos[r]] - self.n_eq
 
     def _solver_order(self):
         """The solver's variable order (``vorder``: original indices; ``vpos``: the inverse): robot by
@@ -442,14 +489,28 @@ class QPStructure:
             if r.shape[0] == 0:
                 pvals.append(np.zeros(0))
                 continue
-            pvals.append((2.0 * np.einsum("bma,bma->ba", J[:, :, a], J[:, :, b])).ravel())
-            t = r - np.einsum("bmk,bk->bm", J, zbar[V])
-            q += np.bincount(V.ravel(), (2.0 * np.einsum("bmk,bm->bk", J, t)).ravel(), nz)
+            pvals.append((2.0 * np.matmul(J.transpose(0, 2, 1), J)[:, a, b]).ravel())
+            t = r - _matvec(J, zbar[V])
+            q += np.bincount(V.ravel(), (2.0 * np.matmul(t[:, None, :], J)[:, 0, :]).ravel(), nz)
         pvals.append(self.reg)
         Px = np.bincount(self.p_inv, np.concatenate(pvals), self.nP)
         q += self.lin
         avals, bvals = self._rows(zbar, d)
         return Px, q[self.vorder], avals[self.a_perm], bvals[self.rorder]
+
+    def bounded(self, Ax, b):
+        """(A data of the general rows (pattern ``G_indices``, ``G_indptr``), their b, lb, ub) of the QP
+        assembled as (Ax, b): the same feasible set, its single-variable rows as bounds."""
+        nz = self.lay.nz
+        o = self._bound_order
+        coef = Ax[self.bound_entry[o]]
+        val = b[self.bound_rows[o]] / coef
+        lb, ub = np.full(nz, -np.inf), np.full(nz, np.inf)
+        if len(o):
+            up = coef > 0
+            ub[self._bound_vars] = np.minimum.reduceat(np.where(up, val, np.inf), self._bound_starts)
+            lb[self._bound_vars] = np.maximum.reduceat(np.where(up, -np.inf, val), self._bound_starts)
+        return Ax[self.G_entries], b[self.general], lb, ub
 
     def from_solver(self, zs):
         """Variables in the layout's order from the solver's."""
@@ -477,7 +538,7 @@ class QPStructure:
         J0[:, 3, 7], J0[:, 4, 8] = -dt, -dt
         z0 = np.concatenate([X[1], X[0, :, 3:5], U[0]], axis=1)
         vals.append(J0[:, self._pat("dyn0")])
-        bs.append(np.einsum("bmk,bk->bm", J0, z0) - eqv[0])
+        bs.append(_matvec(J0, z0) - eqv[0])
         if H > 1:
             ck, sk, vk = c[1:].reshape(-1), sn[1:].reshape(-1), v[1:].reshape(-1)
             B = (H - 1) * n
@@ -490,7 +551,7 @@ class QPStructure:
             Jk[:, 3, 10] = Jk[:, 4, 11] = -dt
             zk = np.concatenate([X[2:], X[1:-1], U[1:]], axis=2).reshape(B, 12)
             vals.append(Jk[:, self._pat("dynk")])
-            bs.append(np.einsum("bmk,bk->bm", Jk, zk) - eqv[1:].reshape(B, 5))
+            bs.append(_matvec(Jk, zk) - eqv[1:].reshape(B, 5))
         # the command's rate limit: |vw_0 - previous command| <= lim dt
         for cc in self.rate:
             lim = (s.dv_max, s.dw_max)[cc] * dt
@@ -541,7 +602,7 @@ class QPStructure:
         Jq[:, 0, 2], Jq[:, 1, 2] = cj * dhx + sj * dhy, -sj * dhx + cj * dhy
         Jq[:, :, 3:5] = -Jq[:, :, 0:2]
         Jq[:, 0, 5], Jq[:, 1, 5] = -sj * wx + cj * wy, -cj * wx - sj * wy
-        Jg = conn[:, None, None] * np.einsum("brc,bck->brk", G, Jq)             # (B, 4, 6)
+        Jg = conn[:, None, None] * np.matmul(G, Jq)             # (B, 4, 6)
         g = conn[:, None] * (G[:, :, 0] * qx[:, None] + G[:, :, 1] * qy[:, None] - hh)
         ys = YAW_ROW_SCALE * conn
         yaw_lim, yaw_off = np.tile(d.yaw_lim, Hc), np.tile(d.yaw_off, Hc)
@@ -557,7 +618,7 @@ class QPStructure:
         sl = zbar[L.sp_idx[ks].reshape(-1)]
         gv = gv - sl[:, None]
         zb = np.concatenate([xi, xj, sl[:, None]], axis=1)
-        b = np.einsum("brk,bk->br", A, zb) - gv
+        b = _matvec(A, zb) - gv
         return A[:, self._pat("pip")], b
 
     def matrices(self, Px, Ax):

@@ -4,16 +4,17 @@ Only message classes are used (no rospy calls), so these run and are tested
 without a roscore.
 """
 
+import genpy
 from geometry_msgs.msg import Point, Pose2D, Twist
 
 from puzzlebot_common import names
-from puzzlebot_msgs.msg import (BehaviorObjectives, BehaviorStatus, ConnectionPair, ConnectionPairArray,
-                                PredictedTrajectories, RobotTrajectory, SolverStats)
+from puzzlebot_msgs.msg import (BehaviorFeedback, BehaviorObjectives, BehaviorResult, BehaviorStatus, ConnectionPair,
+                                ConnectionPairArray, PredictedTrajectories, RobotTrajectory, SolverStats)
 from puzzlebot_mpc.behaviors import BehaviorRequest
 
 
 def request_from_srv(req):
-    """SetBehaviorRequest -> BehaviorRequest."""
+    """SetBehaviorRequest (or a BehaviorGoal: the same fields) -> BehaviorRequest."""
     return BehaviorRequest(behavior=req.behavior, robots=list(req.robots),
                            goals=[(g.x, g.y) for g in req.goals],
                            velocities=[(t.linear.x, t.angular.z) for t in req.velocities],
@@ -100,3 +101,26 @@ def behavior_status_msg(status, stamp):
     msg.robots = list(status.robots)
     msg.errors = [float(e) for e in status.errors]
     return msg
+
+
+def _time(t):
+    """genpy.Time of ``t`` [s]; None (never) -> 0."""
+    return genpy.Time.from_sec(0.0 if t is None else max(0.0, float(t)))
+
+
+def feedback_msg(event):
+    """goals.GoalEvent -> puzzlebot_msgs/BehaviorFeedback."""
+    return BehaviorFeedback(request_id=event.request_id, state=event.state, message=event.message,
+                            elapsed=event.elapsed, progress=float(event.progress), robots=list(event.robots),
+                            errors=[float(e) for e in event.errors], pairs=[pair_msg(p) for p in event.pairs])
+
+
+def result_msg(event=None, outcome="", message=""):
+    """goals.GoalEvent (a final one) -> puzzlebot_msgs/BehaviorResult; without an event, a result of
+    only ``outcome`` and ``message`` (a rejected goal)."""
+    if event is None:
+        return BehaviorResult(outcome=outcome, message=message)
+    return BehaviorResult(request_id=event.request_id, outcome=event.outcome, message=event.message,
+                          robots=list(event.robots), errors=[float(e) for e in event.errors],
+                          started=_time(event.started), ended=_time(event.ended),
+                          pairs=[pair_msg(p) for p in event.pairs])

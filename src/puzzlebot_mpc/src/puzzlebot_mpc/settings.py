@@ -9,6 +9,7 @@ differ.
 from dataclasses import dataclass
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.hardware import CONTROL_PERIOD, V_MAX, W_MAX
 from puzzlebot_common.params import from_mapping, require_positive
 from puzzlebot_mpc.docking import DockingSettings
 
@@ -17,7 +18,7 @@ _DOCK = DockingSettings()   # the docking defaults have one home: puzzlebot_mpc/
 
 @dataclass(frozen=True)
 class MPCSettings:
-    dt: float = 0.1                  # s: control period and Euler step
+    dt: float = CONTROL_PERIOD       # s: control period and Euler step
     horizon: int = 10                # Hm: prediction steps
     constraint_horizon: int = 3      # Hc <= Hm: steps with coupling constraints
     v_max: float = 0.05              # m/s: |v| limit
@@ -47,7 +48,10 @@ class MPCSettings:
     w_slack_butterfly: float = 1.0e5  # s/rad: exact-penalty weight of a butterfly-set violation
     slack_regularisation: float = 1.0e-2  # small quadratic weight on slacks (strictly convex QP)
     pip_margin: float = 0.001        # m: coupling polygons are tightened by this much in the constraint
-    solver: str = "clarabel"         # "clarabel" (real-time iteration, sparse QP) or "ipopt" (full NLP)
+    solver: str = "active_set"       # real-time iteration, one sparse QP per step, solved by "active_set" (the
+                                     # primal-dual active-set method, warm-started) or "clarabel" (interior
+                                     # point); or "ipopt" (the full NLP, the reference)
+    active_set_iterations: int = 10  # working sets tried per QP by active_set before Clarabel solves it
     sqp_iterations: int = 1          # QPs per step when warm (1 = real-time iteration)
     sqp_iterations_cold: int = 3     # QPs per step after a cold start
     decompose: bool = True           # independent subproblems (robots neither coupled nor pairing with each
@@ -71,8 +75,8 @@ class MPCSettings:
     insert_yaw_tolerance: float = 0.1    # rad: ... and the pair's headings agree this well
     insert_confirm_steps: int = 3    # consecutive control steps the head_inserted condition must hold
     insert_timeout: float = 4.0      # s: head_aligned for longer (a jammed anchor): back off, line up again
-    hardware_v_max: float = 0.2      # m/s: the robots' own speed limit (open-loop commands stay within it)
-    hardware_w_max: float = 6.0      # rad/s: the robots' own turn-rate limit
+    hardware_v_max: float = V_MAX    # m/s: the robots' own speed limit (open-loop commands stay within it)
+    hardware_w_max: float = W_MAX    # rad/s: the robots' own turn-rate limit
     wiggle_v_bias: float = 0.03      # m/s: forward speed of the anchor robot while it wiggles out
     wiggle_w_amplitude: float = 3.0  # rad/s: wiggle turn rate amplitude (paper: w_max), the turn rate limit of
                                      # the closed-loop swing; sent directly: within the hardware limits, not
@@ -150,7 +154,8 @@ class MPCSettings:
         """Range and cross-field checks; raise ConfigError."""
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
-                                "sqp_iterations_cold", "solver_threads", "pair_epsilon", "pair_lost_margin",
+                                "sqp_iterations_cold", "solver_threads", "active_set_iterations", "pair_epsilon",
+                                "pair_lost_margin",
                                 "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
@@ -170,8 +175,9 @@ class MPCSettings:
         if self.constraint_horizon > self.horizon:
             raise ConfigError("%s.constraint_horizon (%d) must be <= horizon (%d)"
                               % (where, self.constraint_horizon, self.horizon))
-        if self.solver not in ("clarabel", "ipopt"):
-            raise ConfigError("%s.solver: unknown solver %r; known: clarabel, ipopt" % (where, self.solver))
+        if self.solver not in ("active_set", "clarabel", "ipopt"):
+            raise ConfigError("%s.solver: unknown solver %r; known: active_set, clarabel, ipopt"
+                              % (where, self.solver))
         if self.decouple_creep > self.v_max or self.decouple_settle_speed > self.v_max:
             raise ConfigError("%s: decouple_creep and decouple_settle_speed must be <= v_max (%.3f m/s)"
                               % (where, self.v_max))

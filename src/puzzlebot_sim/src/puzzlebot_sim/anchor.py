@@ -17,7 +17,7 @@ load exceeds what the real beam would carry at that displacement:
   stays there while the barb flips forward, which is how an anchor comes out.
   The ratio is not measured: the rig's force drop near 4.7 mm is the probe
   slipping off the tips, which the slits prevent on the robot (facts.md), so
-  the beam keeps a share of its load (docs/sim.md, "Anchor model").
+  the beam keeps a share of its load (docs/sim.md, "The anchor model and how it works").
 
 Mapping from beam force to joint torque. The profile F(d) is the force on
 the whole anchor (both barbs) against the probe displacement d, measured with

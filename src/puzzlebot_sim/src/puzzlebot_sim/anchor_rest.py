@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
+import numpy as np
 import pybullet as pb
 
 from puzzlebot_common.geometry import yaw_from_quaternion
@@ -132,13 +133,14 @@ class AnchorRest:
         may disturb. ``poses``: name -> (position, quaternion) of every robot now, ``time``: sim time [s]."""
         c, rest = self._client, self.params
         zones = self._zones(poses)
+        near = self._near(zones)
         for name, robot in self._robots.items():
             state = self._state[name]
             lin, ang = pb.getBaseVelocity(robot.body, physicsClientId=c)
             last, state.last_velocity = state.last_velocity, (lin, ang)
             steady = (last is not None and math.dist(lin, last[0]) <= rest.max_dv
                       and abs(ang[2] - last[1][2]) <= rest.max_dw)
-            quiet = steady and self._anchor_clear(name, zones, poses)
+            quiet = steady and self._anchor_clear(name, zones, poses, near[name])
             if state.frozen is not None:
                 if not quiet:
                     self.wake(name)
@@ -211,19 +213,29 @@ class AnchorRest:
             zones[name] = ((x, y, c, s, h, h), (x + c * ax, y + s * ax, c, s, (x1 - x0) / 2.0, hw))
         return zones
 
-    def _anchor_clear(self, name, zones, poses):
+    def _near(self, zones):
+        """Per robot: the other robots whose body centre is close enough to its exposed anchor box for
+        their body or anchor to matter (all pairs at once; the box tests of ``_anchor_clear`` follow)."""
+        names = list(zones)
+        boxes = np.array([zones[n][1][:2] for n in names])
+        bodies = np.array([zones[n][0][:2] for n in names])
+        far = self._zone_radius + self._box_radius + self.params.clearance
+        d2 = (bodies[None, :, 0] - boxes[:, None, 0]) ** 2 + (bodies[None, :, 1] - boxes[:, None, 1]) ** 2
+        np.fill_diagonal(d2, np.inf)
+        near = {n: [] for n in names}
+        for i, j in zip(*(k.tolist() for k in np.nonzero(d2 <= far * far))):    # row by row, in robot order
+            near[names[i]].append(names[j])
+        return near
+
+    def _anchor_clear(self, name, zones, poses, near):
         """True when no other robot or anchor is within the clearance of ``name``'s anchor,
-        the robot is level and the terrain under the anchor is the robot's."""
+        the robot is level and the terrain under the anchor is the robot's. ``near``: the robots
+        that may be that close (``_near``)."""
         rest = self.params
         box = zones[name][1]
         grow = rest.clearance
-        far = self._zone_radius + self._box_radius + grow
-        for other in self._robots:
-            if other == name:
-                continue
+        for other in near:
             body, anchor = zones[other]
-            if (body[0] - box[0]) ** 2 + (body[1] - box[1]) ** 2 > far * far:
-                continue                                  # too far for its body or anchor to matter
             if _obb_overlap(box, body, grow) or _obb_overlap(box, anchor, grow):
                 return False
         (x, y, z), orn = poses[name]

@@ -8,9 +8,11 @@ mocap profile ``config/mocap_NAME.yaml`` (overrides of ``sim``; the profile
 without ROS, so every in-process tool (the experiments, scenario trials, the
 loop demo) simulates what the launch file simulates.
 
-Robot files: ``config/robot.yaml`` is the model; :func:`load_model` reads it
+Robot files: the model is the defaults of :mod:`puzzlebot_sim.params` with
+``config/robot.yaml``'s changes on top (none as shipped: the shipped YAML
+files hold only what differs from the defaults); :func:`load_model` reads it
 (or another file, e.g. one holding the lab's measurements) with overrides on
-top. Fields a file leaves out keep the defaults of :mod:`puzzlebot_sim.params`.
+top. Fields a file leaves out keep the defaults.
 """
 
 import glob

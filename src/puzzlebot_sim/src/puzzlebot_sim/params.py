@@ -1,4 +1,11 @@
-"""Parameter sets of the simulation (units in comments; YAML in config/).
+"""Parameter sets of the simulation: every field's default, unit and source (facts.md, the paper,
+or "not measured": a guess, docs/lab-measurements.md).
+
+The defaults here are the shipped model; ``config/robot.yaml`` and
+``config/sim.yaml`` hold only what a deployment changes (empty as shipped),
+and ``docs/sim.md``'s parameter tables are generated from these classes. The
+dimensions and rates other packages share come from puzzlebot_common
+(``geometry.RobotGeometry``, ``hardware``).
 
 ``RobotParams`` (config/robot.yaml, key ``robot``): the robot body, wheels,
 casters, front opening, anchor holder and side connectors.
@@ -21,6 +28,8 @@ from dataclasses import dataclass, fields
 from typing import Tuple
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_common.hardware import CONTROL_PERIOD, MOCAP_RATE
 from puzzlebot_common.params import from_mapping, require_positive
 
 #: Bullet's collision margin for URDF shapes [m]. A box half-extent or a
@@ -41,15 +50,15 @@ class RobotParams:
     """Simulated PuzzleBot body (config/robot.yaml, ``robot``)."""
 
     # body
-    body_side: float = 0.05          # m, square body, origin at its centre
+    body_side: float = RobotGeometry.body_side  # m, square body, origin at its centre
     body_height: float = 0.045       # m
     body_mass: float = 0.068         # kg (whole robot incl. wheels' share)
-    ground_clearance: float = 0.003  # m, body bottom above the floor
-    body_friction: float = 0.3       # -, body shell (PLA) against anything
+    ground_clearance: float = 0.003  # m, body bottom above the floor (not measured)
+    body_friction: float = 0.3       # -, body shell (PLA) against the floor and the stage (not measured)
     bottom_chamfer: float = 0.0      # m, 45-degree chamfer along the front and back edges of the body's
-    #                                   bottom (0 = square edges; 0 or >= 2 mm, Bullet's margin)
+    #                                   bottom (0 = square edges; 0 or >= 2 mm, Bullet's margin; not measured)
     top_chamfer: float = 0.0         # m, the same along the top front and back edges: how far two coupled
-    #                                   robots fold concave before their tops meet (docs/sim.md)
+    #                                   robots fold concave before their tops meet (docs/sim.md; not measured)
     # wheels (pilots: two pairs at x = +/-pilot_wheel_x)
     wheel_radius: float = 0.010      # m
     wheel_width: float = 0.003       # m
@@ -62,13 +71,14 @@ class RobotParams:
     wheel_no_load_speed: float = 0.0  # rad/s, DC-motor torque-speed line (docs/sim.md): the torque driving a
     #                                   wheel falls linearly from wheel_max_torque at stall to 0 at this speed
     #                                   (back-EMF, modelled as axle damping wheel_max_torque / this speed);
-    #                                   0 = off, ideal speed control up to wheel_max_torque at any speed
-    pilot_wheel_x: float = 0.013     # m, pilot robots' wheel pairs at x = +/-pilot_wheel_x
+    #                                   0 = off, ideal speed control up to wheel_max_torque at any speed;
+    #                                   20 = the no-load speed at the hardware's v_max
+    pilot_wheel_x: float = 0.013     # m, pilot robots' wheel pairs at x = +/-pilot_wheel_x (not measured)
     # ball casters (non-pilot robots), frictionless
     caster_radius: float = 0.005     # m
     caster_x: float = 0.018          # m, casters at (+/-caster_x, 0)
     caster_clearance: float = 0.0005  # m, caster bottom above the floor: the wheels carry the weight
-    wheel_base: float = 0.04         # m, track used to split (v, w) into wheel speeds
+    wheel_base: float = RobotGeometry.wheel_base  # m, track used to split (v, w) into wheel speeds
     # front opening: a mouth between two lips, the slits (a cavity) behind, the battery box behind that
     opening_z: float = -0.010        # m, height of the opening's (and the anchor's) centre line above base_link
     mouth_width: float = 0.0085      # m, gap between the lips
@@ -76,9 +86,10 @@ class RobotParams:
     lip_depth: float = 0.002         # m, thickness of the lips (x); their inner ends are half-cylinders
     slit_width: float = 0.024        # m, full width of the cavity behind the lips
     cavity_depth: float = 0.0145     # m, front face to the battery box
-    lock_height: float = 0.005       # m, lock slot: a recess in the slits' ceiling behind a sill, into which
-    lock_width: float = 0.012        # m   the head rises when the anchor robot tips over an edge (edge lock)
-    lock_sill: float = 0.003         # m, solid ceiling between the lips and the lock slot
+    lock_height: float = 0.005       # m, lock slot (not measured): a recess in the slits' ceiling behind a sill,
+    #                                   into which the head rises when the anchor robot tips over an edge (edge lock)
+    lock_width: float = 0.012        # m, width of the lock slot (not measured)
+    lock_sill: float = 0.003         # m, solid ceiling between the lips and the lock slot (not measured)
     battery_x: float = 0.020         # m, battery box (x, y, z) inside the body
     battery_y: float = 0.026         # m
     battery_z: float = 0.020         # m
@@ -88,9 +99,9 @@ class RobotParams:
     holder_width: float = 0.0084     # m, pocket width (y): anchor base's lateral play +/-0.2 mm
     holder_height: float = 0.0082    # m, pocket height (z)
     holder_slot_width: float = 0.0050  # m, slot in the retaining wall: the anchor's yaw play
-    holder_slot_height: float = 0.0045  # m: the bar rests on the slot's bottom (pitch play)
+    holder_slot_height: float = 0.0045  # m, height of the slot: the bar rests on its bottom (pitch play)
     # side connectors for rigid (bridge) coupling: knob on the left (+y), hole on the right (-y)
-    knob_radius: float = 0.0045      # m
+    knob_radius: float = RobotGeometry.knob_radius  # m
     knob_height: float = 0.010       # m, vertical cylinder, half sunk into the left side
     knob_z: float = 0.008            # m, knob centre height above the body centre
     hole_width: float = 0.010        # m (x)
@@ -208,14 +219,16 @@ class AnchorParams:
     (barbs flare); see puzzlebot_sim/anchor.py for the mapping.
     """
 
-    base_radius: float = 0.004       # m, the base is a ball in the holder (free yaw, one contact) ...
-    collar_width: float = 0.004      # m ... with a collar (box as long as the ball, this wide and high)
-    collar_height: float = 0.002     # m     whose flat ends square the anchor up against the holder's walls
+    base_radius: float = 0.004       # m, the base: a ball in the holder (free yaw, one contact) with a collar
+    collar_width: float = 0.004      # m, the collar: a box as long as the ball, this wide ...
+    collar_height: float = 0.002     # m, ... and this high; its flat ends square the anchor up against the
+    #                                  holder's walls
     keel_height: float = 0.0         # m, a keel through the ball (as long as it, this high; 0 = none), 2 mm wide
     #                                  (2 x URDF_MARGIN: rounded across, so it stops pitch, not yaw): the pocket's
-    #                                  floor and ceiling and the retaining wall stop its pitch
+    #                                  floor and ceiling and the retaining wall stop its pitch; 7.5 mm holds it to the
+    #                                  paper's 0.1 rad but stops the wiggle (docs/sim.md)
     base_mass: float = 0.0010        # kg
-    length: float = 0.0243           # m, base centre to head tip
+    length: float = 0.0243           # m, base centre to head tip (13.3 mm out of the back face when pushed in)
     neck_x: float = 0.0075           # m, base centre to the neck joint
     bar_width: float = 0.003         # m
     bar_height: float = 0.004        # m
@@ -242,10 +255,15 @@ class AnchorParams:
     friction: float = 0.3            # -, anchor base in the holder
     barb_friction: float = 0.0       # -, barbs on the opening (the measured profile already holds friction)
     head_friction: float = 0.3       # -, bar and head (TPU) on the opening
+    # the measured force profile (paper, "Characterization of Anchors")
     forward_profile_mm: Tuple[float, ...] = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)
+    #                                  mm, probe displacement, pushed into an opening
     forward_profile_n: Tuple[float, ...] = (0.0, 0.06, 0.10, 0.13, 0.15, 0.16, 0.165, 0.165, 0.16, 0.15, 0.14)
+    #                                  N, force on the whole anchor there (max < 0.2 N)
     backward_profile_mm: Tuple[float, ...] = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)
+    #                                  mm, probe displacement, pulled out
     backward_profile_n: Tuple[float, ...] = (0.0, 0.05, 0.11, 0.18, 0.26, 0.34, 0.42, 0.51, 0.60, 0.66, 0.70)
+    #                                  N, force on the whole anchor there (0.6 N at 4 mm)
 
     @classmethod
     def from_dict(cls, data, where="anchor"):
@@ -310,19 +328,23 @@ class AnchorParams:
 class SimParams:
     """Sim node / SimWorld options (config/sim.yaml, ``sim``)."""
 
-    physics_rate: int = 200          # Hz, Bullet fixed step (accuracy vs speed: docs/sim.md)
-    pose_rate: int = 100             # Hz, vicon topics and tf
-    pairs_rate: int = 10             # Hz, physical_pairs topic
+    physics_rate: int = 200          # Hz, Bullet fixed step, a multiple of pose_rate (accuracy vs speed: docs/sim.md)
+    pose_rate: int = MOCAP_RATE      # Hz, vicon topics, tf and /clock (the lab's Vicon rate)
+    pairs_rate: int = 10             # Hz, /puzzlebot/sim/physical_pairs; pose_rate is a multiple of it
+    joint_state_rate: int = 10       # Hz, /joint_states (wheels, anchor neck and barbs; robot_state_publisher)
+    diagnostics_period: float = 1.0  # s (wall) between /diagnostics messages (real-time factor, overruns)
     real_time_factor: float = 0.0    # 1 = wall-clock pace, 0 = as fast as possible
-    cmd_timeout: float = 0.5         # s, sim time
-    sync_topic: str = ""             # lockstep with a controller (empty: off)
-    sync_period: float = 0.1         # s
-    sync_timeout: float = 10.0       # s, wall
-    sync_startup_timeout: float = 60.0  # s, wall
-    sync_cmd_timeout: float = 1.0    # s, wall: then wait for the commands of that control step
-    world: str = "flat"
-    gui: bool = False
-    seed: int = 0
+    cmd_timeout: float = 0.5         # s (sim time): a robot without a fresh cmd_vel stops
+    sync_topic: str = ""             # lockstep with a controller: at each sync_period wait for a stamped message
+    #                                  on this topic (empty: off; sim.launch: the MPC's solver_stats)
+    sync_period: float = CONTROL_PERIOD  # s, the controller's period (the MPC's dt)
+    sync_timeout: float = 10.0       # s (wall) to wait for the controller before going on
+    sync_startup_timeout: float = 60.0  # s (wall) to wait for the controller's first message
+    sync_cmd_timeout: float = 1.0    # s (wall), then for the cmd_vel of every robot the controller commanded the
+    #                                  period before (cmd_vel and the sync message travel on separate connections)
+    world: str = "flat"              # flat | step | gap (puzzlebot_sim.worlds)
+    gui: bool = False                # the PyBullet GUI (default: DIRECT, no window)
+    seed: int = 0                    # mocap noise and dropouts
     solver_iterations: int = 15      # Bullet constraint solver iterations per step
     tilted_solver_iterations: int = 100  # ... while any robot is tilted by more than tilt_threshold (edges, hanging)
     tilt_threshold: float = 0.15     # rad
@@ -341,7 +363,8 @@ class SimParams:
         return from_mapping(cls, data, where)
 
     def check(self, where="sim"):
-        require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "cmd_timeout", "sync_period",
+        require_positive(self, ["physics_rate", "pose_rate", "pairs_rate", "joint_state_rate", "diagnostics_period",
+                                "cmd_timeout", "sync_period",
                                 "sync_timeout", "sync_startup_timeout", "sync_cmd_timeout", "solver_iterations", "erp",
                                 "tilted_solver_iterations", "tilt_threshold"], where)
         if self.real_time_factor < 0:
@@ -352,6 +375,9 @@ class SimParams:
         if self.pose_rate % self.pairs_rate:
             raise ConfigError("%s: pose_rate (%d Hz) must be an integer multiple of pairs_rate (%d Hz)"
                               % (where, self.pose_rate, self.pairs_rate))
+        if self.pose_rate % self.joint_state_rate:
+            raise ConfigError("%s: pose_rate (%d Hz) must be an integer multiple of joint_state_rate (%d Hz)"
+                              % (where, self.pose_rate, self.joint_state_rate))
         ticks = self.sync_period * self.pose_rate
         if abs(ticks - round(ticks)) > 1e-6:
             raise ConfigError("%s: sync_period (%g s) must be a whole number of pose periods (1/%d s)"

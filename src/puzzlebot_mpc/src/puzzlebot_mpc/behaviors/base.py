@@ -18,8 +18,10 @@ per request and calls, in this order:
 3. every control step while it runs: ``status(now, poses, newly, lost,
    elapsed)`` -> :class:`Progress`; then, if still running ``timeout`` [s]
    after the start (the request's; 0: never), ``timed_out(...)`` ->
-   :class:`Progress`; then, if it still runs, ``objectives(obj, now,
-   poses)`` adds this step's objectives to ``obj`` (a copy of ``static``).
+   :class:`Progress`; then ``completion(errors, elapsed)``, the fraction done
+   (BehaviorStatus.progress: the action's feedback); then, if it still runs,
+   ``objectives(obj, now, poses)`` adds this step's objectives to ``obj`` (a
+   copy of ``static``).
 4. ``done(poses)`` when another behaviour starts: give back what it holds
    (the decouple's pair).
 
@@ -68,6 +70,7 @@ class BehaviorStatus:
     message: str
     robots: List[str] = field(default_factory=list)
     errors: List[float] = field(default_factory=list)   # per robot; go_to_goal: distance [m]
+    progress: float = float("nan")                      # 0..1 done (Behavior.completion); NaN: not measurable
 
 
 @dataclass
@@ -173,6 +176,12 @@ class Behavior:
     def errors(self, poses):
         """BehaviorStatus.errors from ``poses``; also reported after the behaviour ended. Default: none."""
         return []
+
+    def completion(self, errors, elapsed):
+        """Fraction 0..1 of the behaviour done, from this step's ``errors`` (status) and ``elapsed`` [s]:
+        BehaviorStatus.progress, the action's feedback. Default: NaN (nothing to measure it by); the
+        timeout, when the request has one, says nothing about progress."""
+        return float("nan")
 
     def pair_slots(self):
         """Pairs outside the pair book that need a slot in the MPC (the pair being decoupled)."""

@@ -95,6 +95,11 @@ class Couple(Behavior):
             len(a.pairs) - len(book.goals), len(a.pairs),
             ", ".join(p.describe() for p in book.active) or "none"), errors=errors)
 
+    def completion(self, errors, elapsed):
+        """The share of the goal pairs coupled."""
+        total = len(self.assignment.pairs)
+        return (total - len(self.ctx.pairs.goals)) / total if total else 1.0
+
     def timed_out(self, now, poses, errors, elapsed):
         return Progress(FAILED, "timeout after %.2f s; not coupled: %s" % (
             elapsed, ", ".join(p.describe() for p in self.ctx.pairs.goals)), errors)

@@ -28,7 +28,8 @@ While it runs the pair is out of the pair book (no polygon constraint) but
 keeps a slot in the MPC. Fails after ``timeout`` s (0: none); a decouple
 that fails or is replaced puts the pair back among the coupled ones if it
 still is coupled geometrically. Status errors: how far [m] the anchor head
-is outside o's footprint (negative: inside).
+is outside o's footprint (negative: inside). Progress: C_a's distance from
+C_o over the release distance (1 once released, while settling).
 """
 
 import math
@@ -141,6 +142,7 @@ class Decouple(Behavior):
         self.ctx.pairs.remove_coupled(d.key)
         d.status = pr.HEAD_INSERTED
         self.released_at = None          # time the pair separated (settle phase from then on)
+        self.released_share = float("nan")  # C_a's distance from C_o over the release distance (progress)
         self.release_count = 0           # consecutive steps the release was seen
         self.release_message = ""
         self.robots = list(d.robots)
@@ -184,6 +186,9 @@ class Decouple(Behavior):
             return Progress(errors=[float("nan")])
         margin = pr.head_margin(d, pi, pj, self.ctx.geometry.footprint())
         sep = self.separation(d, poses)
+        s = self.settings
+        self.released_share = min(1.0, sep / (self.ctx.geometry.anchor_length + s.decouple_clearance +
+                                              s.pair_epsilon))
         if self.released_at is None:
             self.release_count = self.release_count + 1 if self.decoupled(d, poses) else 0
             if self.release_count >= self.settings.decouple_confirm_steps:
@@ -199,6 +204,9 @@ class Decouple(Behavior):
             self.pair = None             # released: it stays out of the pair book
             return Progress(SUCCEEDED, self.release_message + "; assemblies settled", [-margin])
         return Progress(message=self.release_message + "; settling", errors=[-margin])
+
+    def completion(self, errors, elapsed):
+        return 1.0 if self.released_at is not None else self.released_share
 
     def timed_out(self, now, poses, errors, elapsed):
         message = "timeout after %.2f s; %s-%s still coupled" % ((elapsed,) + tuple(self.robots))

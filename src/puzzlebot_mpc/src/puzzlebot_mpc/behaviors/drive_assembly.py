@@ -6,7 +6,8 @@ own position along its heading, turning as its couplings allow (a chain of
 unicycles turns like a train, within the anchors' yaw freedom). Succeeds
 after ``distance`` metres of the lead (or after ``timeout`` seconds when no
 distance is given); fails if a coupled pair of the assembly is lost on the
-way. Status errors: the distance [m] the lead has moved.
+way. Status errors: the distance [m] the lead has moved. Progress: that
+distance over ``distance`` (without one: the elapsed time over ``timeout``).
 """
 
 import math
@@ -62,6 +63,11 @@ class DriveAssembly(Behavior):
             return Progress(SUCCEEDED, "the assembly %s drove %.3f m in %.2f s with every pair coupled"
                             % ("+".join(self.assembly), moved, elapsed), [moved])
         return Progress(message="driving: %.3f m" % moved, errors=[moved])
+
+    def completion(self, errors, elapsed):
+        if self.req.distance > 0:
+            return min(1.0, errors[0] / self.req.distance) if errors and errors[0] == errors[0] else float("nan")
+        return min(1.0, elapsed / self.req.timeout)
 
     def timed_out(self, now, poses, errors, elapsed):
         if self.req.distance <= 0:

@@ -3,7 +3,8 @@
 Succeeds when every robot is within ``tolerance`` (default the setting
 ``goal_tolerance``) of its goal; fails after ``timeout`` s (0: none), naming
 the robots not there. Status errors: each robot's distance to its goal [m]
-(NaN without a pose).
+(NaN without a pose). Progress: the mean over the robots of the share of
+its distance to the goal driven since the first status (1 within tolerance).
 """
 
 import math
@@ -25,6 +26,7 @@ class GoToGoal(Behavior):
 
     def start(self, now, poses, static):
         self.goals = np.array([tuple(g) for g in self.req.goals], float).reshape(-1, 2)
+        self.first_errors = None
         for k, name in enumerate(self.robots):
             i = self.ctx.index[name]
             static.goal[i] = self.req.goals[k]
@@ -49,6 +51,17 @@ class GoToGoal(Behavior):
             return Progress(SUCCEEDED, "all %d robot(s) within %.1f mm of their goals after %.2f s"
                             % (len(errors), 1e3 * tol, elapsed), errors)
         return Progress(errors=errors)
+
+    def completion(self, errors, elapsed):
+        tol = self.tolerance()
+        if self.first_errors is None and errors and all(e == e for e in errors):
+            self.first_errors = list(errors)             # the distances when it started
+        first = self.first_errors
+        if first is None or not all(e == e for e in errors):
+            return float("nan")
+        done = [1.0 if e <= tol or e0 <= tol else min(1.0, max(0.0, (e0 - e) / (e0 - tol)))
+                for e, e0 in zip(errors, first)]
+        return sum(done) / len(done)
 
     def timed_out(self, now, poses, errors, elapsed):
         tol = self.tolerance()

@@ -17,8 +17,8 @@ import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc import pairs as pr
-from puzzlebot_mpc.behaviors.base import (FAILED, IDLE, RUNNING, BehaviorError, BehaviorRequest, BehaviorStatus,
-                                          Context, DisplayObjectives, finite)
+from puzzlebot_mpc.behaviors.base import (FAILED, IDLE, RUNNING, SUCCEEDED, BehaviorError, BehaviorRequest,
+                                          BehaviorStatus, Context, DisplayObjectives, finite)
 from puzzlebot_mpc.behaviors.registry import REGISTRY
 from puzzlebot_mpc.behaviors.stop import STOP
 from puzzlebot_mpc.controller import Objectives, PairObjective
@@ -75,12 +75,25 @@ class BehaviorManager:
         """The current behaviour's request id (0 before the first request)."""
         return self._request_id
 
+    @property
+    def last_id(self):
+        """The last request id handed out (queued requests included)."""
+        return self._last_id
+
     def refuse(self, request_id, req, message):
         """Report request ``request_id`` (queued, now due) as FAILED with ``message``; the robots rest."""
         self._req, self._robots, self._request_id = req, list(req.robots), request_id
         self._refused = True
         self._state, self._message = FAILED, message
         self._rest()
+
+    def set_settings(self, settings):
+        """Use ``settings`` (MPCSettings, live tuning: puzzlebot_mpc.tuning) for new requests and the running
+        behaviour from now on."""
+        self.settings = settings
+        self._ctx.settings = settings
+        if self._behavior is not None:
+            self._behavior.settings = settings
 
     def note(self, text):
         """Append ``text`` to the current status message (e.g. queued requests dropped)."""
@@ -186,14 +199,16 @@ class BehaviorManager:
                 progress = behavior.timed_out(now, poses, progress.errors, elapsed)
             if progress.message is not None:
                 self._message = progress.message
+            done = 1.0 if progress.state == SUCCEEDED else behavior.completion(progress.errors, elapsed)
             if progress.state != RUNNING:
                 self._state = progress.state
                 self._rest()
             errors = progress.errors
         else:
             errors = behavior.errors(poses) if behavior is not None else []
+            done = 1.0 if self._state == SUCCEEDED else float("nan")
         return BehaviorStatus(self._request_id, req.behavior, self._state, self._message,
-                              list(self._robots), errors)
+                              list(self._robots), errors, done)
 
     def _rest(self):
         self._static = Objectives.stop_all(len(self.names))

@@ -45,20 +45,23 @@ def plot(result, path):
     title = "identified: %s" % (", ".join(result.effect_names) or "no effect (nominal model kept)")
     fig.suptitle("%s\n%s" % (result.path, title), fontsize=11)
 
-    # (a), (b) validation errors over time
+    # (a), (b) validation errors over time, log scale: the nominal model's (dashed, drawn first and wider)
+    # stay visible beside the identified model's, which are an order of magnitude smaller
     nom = _validation_errors(result, result.selection.nominal_errors)
     fin = _validation_errors(result, result.selection.final_errors)
-    for (name, t, ep_n, ey_n), (_, _, ep_f, ey_f) in zip(nom, fin):
-        line, = ax[0, 0].plot(t, 1e3 * ep_f, lw=1.0, label="%s identified" % name)
-        ax[0, 0].plot(t, 1e3 * ep_n, ls="--", lw=0.8, color=line.get_color(), alpha=0.45)
-        ax[0, 1].plot(t, 1e3 * ey_f, lw=1.0, color=line.get_color(), label="%s identified" % name)
-        ax[0, 1].plot(t, 1e3 * ey_n, ls="--", lw=0.8, color=line.get_color(), alpha=0.45)
+    for k, ((name, t, ep_n, ey_n), (_, _, ep_f, ey_f)) in enumerate(zip(nom, fin)):
+        color = "C%d" % k
+        for axis, nominal, final in ((ax[0, 0], ep_n, ep_f), (ax[0, 1], ey_n, ey_f)):
+            axis.semilogy(t, np.maximum(1e3 * np.abs(nominal), 1e-2), ls="--", lw=1.4, color=color, alpha=0.5,
+                          zorder=1, label="%s nominal" % name)
+            axis.semilogy(t, np.maximum(1e3 * np.abs(final), 1e-2), lw=0.9, color=color, zorder=2,
+                          label="%s identified" % name)
     h = result.settings.horizon_s
     ax[0, 0].set(title="(a) held-out position error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
-                 xlabel="window start [s]", ylabel="[mm]")
-    ax[0, 1].set(title="(b) held-out yaw error, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
-                 xlabel="window start [s]", ylabel="[mrad]")
-    ax[0, 0].legend(fontsize=7)
+                 xlabel="window start [s]", ylabel="[mm] (log)")
+    ax[0, 1].set(title="(b) held-out |yaw error|, %.1f s open loop\n(solid: identified, dashed: nominal)" % h,
+                 xlabel="window start [s]", ylabel="[mrad] (log)")
+    ax[0, 0].legend(fontsize=7, ncol=2)
 
     # (c) residual vs commands: lagged before the window, and during it
     lags = np.arange(0, result.settings.max_command_lag_s + 1e-9, residuals.COMMAND_LAG_STEP_S)
@@ -80,12 +83,28 @@ def plot(result, path):
             acf = np.mean([residuals.autocorrelation(rr.res[comp], lags_w.size) for rr in an.robots], axis=0)
             ax[1, 1].plot(lags_w * result.settings.residual_stride_s, acf, marker="o", ms=3, color=color,
                           label=comp if an is fin_an else None, **style)
-    n_per = np.mean([rr.t.size for rr in fin_an.robots]) if fin_an.robots else 1
-    bound = 1.96 / np.sqrt(n_per * max(len(fin_an.robots), 1))
+    # the band at the level the verdict tests each component's autocorrelation (Bonferroni over the
+    # families, components and lags), so a point outside it is what the verdict would call structure;
+    # the verdict itself (portmanteau test over all lags, mean, correlations) is written in the panel
+    from scipy import stats
+
+    n_all = sum(rr.t.size for rr in fin_an.robots) or 1
+    alpha = result.settings.residual_alpha / residuals.FAMILIES / len(residuals.COMPONENTS)
+    bound = float(stats.norm.isf(alpha / (2 * lags_w.size))) / np.sqrt(n_all)
     for a in (bound, -bound):
         ax[1, 1].axhline(a, color="k", lw=0.6, ls=":")
-    ax[1, 1].set(title="(d) residual autocorrelation\n(dashed: nominal, dotted: 95 % bound of white noise)",
-                 xlabel="lag [s]", ylabel="autocorrelation", ylim=(-1, 1))
+    auto_white = all(fin_an.autocorr[c]["p"] >= alpha for c in residuals.COMPONENTS)
+    if fin_an.white:
+        verdict = "residual verdict: white"
+    elif auto_white:        # the verdict's other tests (mean, correlations: panel e) found the structure
+        verdict = "autocorrelation: none;\nresidual verdict: structured (its mean or correlations, panel e)"
+    else:
+        verdict = "autocorrelation found;\nresidual verdict: structured"
+    ax[1, 1].text(0.02, 0.04, "identified model: %s\nportmanteau p: %s (autocorrelated below %.2g)"
+                  % (verdict, ", ".join("%s %.2g" % (c, fin_an.autocorr[c]["p"]) for c in residuals.COMPONENTS),
+                     alpha), transform=ax[1, 1].transAxes, fontsize=8, va="bottom")
+    ax[1, 1].set(title="(d) residual autocorrelation (dashed: nominal)\n(dotted: the bound at the verdict's "
+                       "test level)", xlabel="lag [s]", ylabel="autocorrelation", ylim=(-1, 1))
     ax[1, 1].legend(fontsize=7)
 
     # (e) strongest correlations: those of the nominal residual, then what is left

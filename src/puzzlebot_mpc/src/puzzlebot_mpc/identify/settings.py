@@ -43,10 +43,11 @@ class IdentifySettings:
     max_command_lag_s: float = 0.5   # s: regressors include the commands up to this far back
     max_nfev: int = 20               # least-squares function evaluations per fit
     cv_nfev: int = 5                 # ... per cross-validation refit (started from the fit on all data)
-    glitch_speed: float = 1.0        # m/s: a pose farther from its neighbours' median than this speed
-    glitch_margin_m: float = 0.01    # m    allows (plus this margin) is a mocap glitch and dropped
-    glitch_turn_rate: float = 20.0   # rad/s: the same for the yaw ...
-    glitch_margin_rad: float = 0.3   # rad  ... with this margin
+    glitch_speed: float = 1.0        # m/s: a pose farther from its neighbours' median than this speed allows
+    #                                  (plus glitch_margin_m) is a mocap glitch and is dropped
+    glitch_margin_m: float = 0.01    # m: the margin on top of what glitch_speed allows
+    glitch_turn_rate: float = 20.0   # rad/s: the same for the yaw (plus glitch_margin_rad)
+    glitch_margin_rad: float = 0.3   # rad: the margin on top of what glitch_turn_rate allows
 
     @classmethod
     def from_dict(cls, data, where="identify"):

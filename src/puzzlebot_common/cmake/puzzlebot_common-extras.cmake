@@ -1,0 +1,22 @@
+# CMake helpers of the PuzzleBot workspace (catkin CFG_EXTRAS of puzzlebot_common; a package gets them
+# with find_package(catkin REQUIRED COMPONENTS puzzlebot_common)).
+#
+# puzzlebot_install_python(PROGRAMS file... DESTINATION dir)
+#   catkin_install_python, then, at install time, the installed scripts' first line becomes
+#   "#!<PYTHON_EXECUTABLE>": the interpreter the workspace was built with (scripts/setup.sh: .venv's, on
+#   /usr/bin/python3 with casadi and pybullet). catkin_install_python rewrites only "#!/usr/bin/env python"
+#   and keeps "env", so an installed node would start with whatever python3 is first on PATH (README:
+#   the pyenv trap). The devel space's wrappers already carry PYTHON_EXECUTABLE.
+function(puzzlebot_install_python)
+  catkin_install_python(${ARGN})
+  cmake_parse_arguments(ARG "OPTIONAL" "DESTINATION" "PROGRAMS" ${ARGN})
+  foreach(program ${ARG_PROGRAMS})
+    get_filename_component(name "${program}" NAME)
+    install(CODE "
+      set(_script \"\$ENV{DESTDIR}\${CMAKE_INSTALL_PREFIX}/${ARG_DESTINATION}/${name}\")
+      file(READ \"\${_script}\" _text)
+      string(REGEX REPLACE \"^#![^\\n]*\" \"#!${PYTHON_EXECUTABLE}\" _text \"\${_text}\")
+      file(WRITE \"\${_script}\" \"\${_text}\")
+    ")
+  endforeach()
+endfunction()
