@@ -63,3 +63,29 @@ def test_failure_text_whole_words_and_short_timeouts():
     assert text.startswith("timeout (90 s): not coupled: anchor pz1->pz2 (decoupled)")
     assert len(text) <= 99 and text.endswith(" ...") and "(head_al" not in text.replace("(head_aligned)", "")
     assert failure_text("pz1-pz3 not seated") == "pz1-pz3 not seated"
+
+
+def test_set_overrides_are_checked_and_reach_the_controller(monkeypatch):
+    from puzzlebot_experiments import scenario_trials as st
+
+    assert st.parse_overrides(["dock_pull_test=true", "insert_timeout=2.5"]) == \
+        {"dock_pull_test": True, "insert_timeout": 2.5}
+    for bad, match in (("no_such_setting=1", "no_such_setting"), ("insert_timeout", "KEY=VALUE"),
+                       ("insert_timeout=-1", "insert_timeout")):
+        with pytest.raises(ConfigError, match=match):
+            st.parse_overrides([bad])
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def closed_loop(world, names=None, settings=None):
+        seen.append(settings)
+        raise Stop
+
+    monkeypatch.setattr(st, "ClosedLoop", closed_loop)
+    with pytest.raises(Stop):
+        st.run_task((SCENARIOS, "pair_cycle", 1, 0, {"dock_pull_test": True, "insert_timeout": 2.5}))
+    assert seen[0].dock_pull_test is True and seen[0].insert_timeout == 2.5
+    assert seen[0].docking_settings().pull_test is True

@@ -121,3 +121,22 @@ def test_bad_settings_are_clear_errors():
         dk.DockingSettings(seat_pull_min=0.02).check()
     with pytest.raises(ConfigError, match="must reach past"):
         dk.DockingSettings(pull_speed=0.005).check()
+
+
+def test_an_approach_that_comes_no_closer_backs_off_and_one_that_closes_in_does_not():
+    s = dk.DockingSettings()
+    d = dk.Docking(s, mover="j", now=0.0)
+    steps = int(s.stall_time / DT)
+    # closing in 1 mm per second: progress, never a stall
+    assert not any(d.approach_stalled(0.040 - 0.0001 * k, 0.010, 0.5, k * DT) for k in range(2 * steps))
+    # stuck beside the partner (10 mm out, 14 mm aside, 1 rad askew, jittering by 1 mm): a stall after stall_time
+    d = dk.Docking(s, mover="j", now=0.0)
+    stalled = [d.approach_stalled(0.010 + 0.001 * (k % 2), 0.014, 1.0, k * DT) for k in range(steps + 2)]
+    assert stalled.index(True) == steps and d.phase == dk.BACKOFF and "stalled" in d.note
+    v, w = d.command(mover_heading=0.0, partner_heading=1.0).v, d.command(0.0, 1.0).w
+    assert v < 0 and w > 0                                # backs away from the partner, turning to its heading
+    t = (steps + 2) * DT
+    for k in range(int(s.backoff_time / DT) + 1):
+        d.update(0.03, 0.014, 1.0, t + k * DT)
+    assert d.phase == dk.APPROACH                        # a fresh approach, its progress measured anew:
+    assert d.best_at is None or d.best_at >= steps * DT + s.backoff_time - 1e-9

@@ -18,8 +18,12 @@ A trial succeeds when every step does; it stops at the first failed step.
 """
 
 import numpy as np
+import yaml
+
+from puzzlebot_common.errors import ConfigError
 
 from puzzlebot_common.robots import parse_robot_list
+from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
 from puzzlebot_sim.coupling import HEAD_ALIGNED, HEAD_INSERTED
@@ -61,10 +65,28 @@ def physical_problems(cl, step, coupled, body_side):
     return problems
 
 
-def run_trial(directory, scenario, seed, trial, cfg=None):
+def parse_overrides(items):
+    """{setting: value} of ``KEY=VALUE`` texts (values read as YAML scalars: 0.002, true, active_set);
+    raises ConfigError on a malformed item or a setting MPCSettings does not have or accept."""
+    out = {}
+    for item in items or ():
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set %r: expected KEY=VALUE (an MPC setting, e.g. dock_pull_test=true)" % item)
+        try:
+            out[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError as e:
+            raise ConfigError("--set %s: %s" % (item, e))
+    if out:
+        load_settings(sim=True, overrides=out)         # unknown keys, wrong types, ranges: a clear error now
+    return out
+
+
+def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
     """One run of ``scenario`` (from ``directory``); returns a JSON-able record.
 
     ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
+    ``overrides``: MPC settings on top of mpc.yaml + mpc_sim.yaml (:func:`parse_overrides`).
     """
     cfg = cfg or load_sim_config(mocap=MOCAP)
     wseed = world_seed(seed, trial)
@@ -77,7 +99,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
     steps, ok = [], True
     try:
         w.run(SETTLE_AT_START)
-        cl = ClosedLoop(w, names=names)
+        cl = ClosedLoop(w, names=names, settings=load_settings(sim=True, overrides=overrides))
         for step in sc.steps:
             req = request_of(step)
             limit = (step.timeout or 60.0) + SETTLE
@@ -98,13 +120,17 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
         failed_steps = cl.failed_steps
     finally:
         w.close()
-    return {"scenario": scenario, "seed": seed, "trial": trial, "success": ok, "steps": steps,
-            "failed_mpc_steps": failed_steps}
+    rec = {"scenario": scenario, "seed": seed, "trial": trial, "success": ok, "steps": steps,
+           "failed_mpc_steps": failed_steps}
+    if overrides:
+        rec["mpc_overrides"] = dict(overrides)
+    return rec
 
 
 def run_task(task):
-    """run_trial for a (directory, scenario, seed, trial) tuple (a worker process's entry point)."""
-    return run_trial(*task)
+    """run_trial for a (directory, scenario, seed, trial[, overrides]) tuple (a worker process's entry point)."""
+    directory, scenario, seed, trial = task[:4]
+    return run_trial(directory, scenario, seed, trial, overrides=task[4] if len(task) > 4 else None)
 
 
 def summarize(records, scenario_steps):

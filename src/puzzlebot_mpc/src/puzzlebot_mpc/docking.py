@@ -1,14 +1,31 @@
-"""Seating an anchor pair and proving it seated, from what the hardware has: poses, commands, time.
+"""Seating an anchor pair and keeping it seated, from what the hardware has: poses, commands, time.
 
 The MPC brings an anchor pair's head to the partner's mouth (the *approach*,
-Algorithm 2's decoupled -> head_aligned). From there the geometry of the
-poses can no longer tell a seated anchor from one whose barb sits on the
-lip: both leave the robots face to face. What tells them apart is how the
-pair answers a pull. A robot cannot pull a seated anchor out (the barbs
-hold 0.6 N at 4 mm, a robot pushes 0.5 N: facts.md), so the pair stretches
-by the anchor's travel in its holder plus the barbs' give, then stalls; an
-anchor that is not behind the lips gives way further, or not at all when a
-barb is folded against the head. :class:`Docking` runs one pair through
+Algorithm 2's decoupled -> head_aligned). What happens from there is chosen
+by two settings:
+
+- ``insert_by_mpc`` (default): the MPC pushes the anchor home itself
+  (Algorithm 2's head_aligned -> head_inserted, with its lining-up test,
+  ``insert_*`` in MPCSettings). A push that stays head_aligned for
+  ``insert_timeout`` has jammed: the barb sits on the lip. The pair backs
+  off and :meth:`Docking.jammed` aims the next approach ``aim_step`` to the
+  side the mover was pushed (the anchor turns freely in its holder, so the
+  head is not where the partner's pose puts it), up to ``aim_max``.
+- ``insert_by_mpc`` false: this module drives the mover straight in (the
+  ``push`` phase below) and backs it off after ``push_timeout``.
+
+With ``pull_test`` the pair is pulled on once home: a robot cannot pull a
+seated anchor out (the barbs hold 0.6 N at 4 mm, a robot pushes 0.5 N:
+facts.md), so a seated pair stretches by the anchor's travel in its holder
+plus the barbs' give, then stalls; an anchor not behind the lips gives way
+further, or not at all when a barb is folded against the head. Off by
+default: measured, the pull unseated more pairs than it caught
+(docs/mpc.md, "Seating").
+
+Whatever seated it, a coupled pair is then watched (:class:`SeatMonitor`):
+faces more than ``repair_gap`` apart for ``repair_time`` (a pair pushed out
+of its slits by robots docking elsewhere) -> re-seated from ``push`` while
+a couple runs. The phases of one pair's manoeuvre (:class:`Docking`):
 
 =========  ==============================================================
 phase      what the mover (the robot that docks) does
@@ -93,6 +110,9 @@ class DockingSettings:
     backoff_time: float = 0.8         # s
     aim_step: float = 0.002           # m: after a jammed push, aim the mouth this much further to the side
     aim_max: float = 0.004            # m: ... up to this far off the partner's axis
+    stall_time: float = 8.0           # s: an approach (head not yet in the mouth) that has not come
+    #                                   stall_progress closer in this long has stalled: back off, then again
+    stall_progress: float = 0.005     # m: ... (distance of C_a from the mouth plus 20 mm per rad of heading error)
     repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
@@ -152,6 +172,9 @@ class Docking:
         self.aim = 0.0                # m: where the approach puts C_a across the opening's axis (j's frame, +y)
         self.heading_ref = None       # rad: the heading a driven phase holds (the partner's at its start)
         self.last_gap = None          # m: the gap at the previous update
+        self.best = None              # m: the approach's closest distance so far (approach_stalled) ...
+        self.best_at = None           # s: ... and when it was reached
+        self.stalls = 0               # approaches that stalled
 
     # ------------------------------------------------------------ helpers
     def _to(self, phase, now, note=""):
@@ -174,8 +197,27 @@ class Docking:
         s = self.s
         self.attempts += 1
         self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+        self.best = self.best_at = None
         self.note = "insertion %d jammed (%.1f mm out, %.1f mm aside); aiming %.1f mm across" % (
             self.attempts, 1e3 * gap, 1e3 * lateral, 1e3 * self.aim)
+
+    def approach_stalled(self, gap, lateral, dtheta, now):
+        """During the approach (the head not yet in the mouth): True when the pair has come no closer than
+        ``stall_progress`` in ``stall_time`` (the MPC stuck in a local minimum, e.g. the mover beside its
+        partner at a steep angle). The mover then backs off (``backoff_*``), turning to its partner's
+        heading, and approaches again from there."""
+        s = self.s
+        d = math.hypot(max(gap, 0.0), lateral - self.aim) + 0.02 * abs(dtheta)
+        if self.best is None or d < self.best - s.stall_progress or now is None or self.best_at is None:
+            self.best, self.best_at = d, now
+            return False
+        if now - self.best_at < s.stall_time:
+            return False
+        self.stalls += 1
+        self._to(BACKOFF, now, "approach %d stalled %.0f mm away for %.0f s" % (
+            self.stalls, 1e3 * d, now - self.best_at))
+        self.best = self.best_at = None
+        return True
 
     def start_pull(self, gap, now):
         """The pair is pushed home (by the MPC): test it with the pull."""
@@ -205,6 +247,8 @@ class Docking:
         if phase == APPROACH:
             if self.ready_to_push(gap, lateral, dtheta):
                 self._to(PUSH, now, "lined up %.1f mm off axis, %.1f mm out" % (1e3 * lateral, 1e3 * gap))
+            else:
+                self.approach_stalled(gap, lateral, dtheta, now)
         elif phase == PUSH:
             if self.home_count >= s.home_steps and not s.pull_test:
                 self._to(SEATED, now, "pushed home")
@@ -242,6 +286,7 @@ class Docking:
         elif phase == BACKOFF:
             if t >= s.backoff_time - 1e-9:
                 self._to(APPROACH, now, self.note)
+                self.best = self.best_at = None
         return False
 
     def command(self, mover_heading, partner_heading):

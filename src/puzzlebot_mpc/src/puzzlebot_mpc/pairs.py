@@ -553,6 +553,8 @@ class PairBook:
                           and since is not None and now - since > self.seating.align_timeout)
                 if jammed:                       # pushed in for align_timeout without getting home
                     dock.jammed(gap, lateral, now)
+                elif status == DECOUPLED and dock.approach_stalled(gap, lateral, dtheta, now):
+                    pass                         # backs off (a driven phase) and approaches again
                 elif status == HEAD_INSERTED and self.dock_settings.pull_test:
                     dock.start_pull(gap, now)
                     status = HEAD_ALIGNED
@@ -562,10 +564,10 @@ class PairBook:
                 seated = dock.update(gap, lateral, dtheta, now)
                 if seated:
                     status = HEAD_INSERTED
+                elif dock.phase == BACKOFF or before == BACKOFF:
+                    status = DECOUPLED           # backing off, then the approach from the standoff again
                 elif dock.phase in DRIVEN or status == HEAD_INSERTED:
                     status = HEAD_ALIGNED        # the pose alone does not prove the anchor seated
-                elif before == BACKOFF:
-                    status = DECOUPLED           # backed off: approach from the standoff again
             if status != pair.status or pair.since is None:
                 pair.since = now
             pair.status = status
