@@ -32,12 +32,13 @@ def test_a_pair_cycle_run_is_checked_in_bullet_step_by_step():
 
 def test_summary_counts_steps_reached_and_passed():
     steps = scenario_steps(SCENARIOS, "couple4_line")
-    ok = {"behavior": "x", "ok": True, "sim_seconds": 10.0, "problems": []}
+    ok = {"behavior": "x", "ok": True, "sim_seconds": 10.0, "problems": [], "coupled_pairs": 3}
     bad = dict(ok, ok=False, problems=["pz1-pz2 not seated"])
     records = [{"trial": 0, "success": True, "steps": [ok, ok, ok], "failed_mpc_steps": 0},
                {"trial": 1, "success": False, "steps": [ok, bad], "failed_mpc_steps": 0}]
     s = summarize(records, steps)
     assert (s["trials"], s["successes"], s["failed_trials"]) == (2, 1, [1])
+    assert (s["pairs_held"], s["pairs_not_seated"]) == (15, 1)
     assert [(x["reached"], x["succeeded"]) for x in s["steps"]] == [(2, 2), (2, 1), (1, 1)]
     assert "| couple all robots into line | 2 | 2 | 10.0 | 10.0 |" in format_table(s)
 

@@ -124,7 +124,9 @@ def test_bad_settings_are_clear_errors():
 
 
 def test_an_approach_that_comes_no_closer_backs_off_and_one_that_closes_in_does_not():
-    s = dk.DockingSettings()
+    off = dk.Docking(dk.DockingSettings(), now=0.0)           # off by default
+    assert not any(off.approach_stalled(0.010, 0.014, 1.0, k * DT) for k in range(300))
+    s = dk.DockingSettings(stall_time=8.0)
     d = dk.Docking(s, mover="j", now=0.0)
     steps = int(s.stall_time / DT)
     # closing in 1 mm per second: progress, never a stall

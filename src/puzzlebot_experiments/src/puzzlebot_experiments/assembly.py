@@ -73,7 +73,8 @@ def assembly_trial(task):
     couple = rec["steps"][0] if rec["steps"] else {}
     return dict(rec, n=n, couple_ok=bool(couple.get("ok")), couple_s=couple.get("sim_seconds"),
                 controller_coupled=couple.get("state") == "succeeded",
-                not_seated=[p for s in rec["steps"] for p in s.get("problems", []) if "not seated" in p])
+                pairs_coupled=couple.get("coupled_pairs", 0),
+                not_seated=[p for p in couple.get("problems", []) if "not seated" in p])
 
 
 def assembly_sweep(sizes, trials, seed, executor, results):
@@ -96,7 +97,10 @@ def assembly_sweep(sizes, trials, seed, executor, results):
 
 
 def summarize(records):
-    """{n: {trials, successes, couple_successes, median_couple_s, controller_coupled, mismatches}}."""
+    """{n: {trials, successes, couple_successes, median_couple_s, controller_coupled, mismatches,
+    pairs_coupled, pairs_not_seated}}: mismatches = trials whose couple step the controller called done
+    with a pair Bullet finds not seated; pairs_*: over every trial's couple step, the pairs the controller
+    held coupled at its end and how many of those Bullet found not seated."""
     import numpy as np
 
     out = {}
@@ -107,5 +111,7 @@ def summarize(records):
                   "couple_successes": len(ok),
                   "median_couple_s": round(float(np.median(ok)), 1) if ok else None,
                   "controller_coupled": sum(bool(r["controller_coupled"]) for r in rs),
-                  "mismatches": sum(bool(r["controller_coupled"]) and not r["couple_ok"] for r in rs)}
+                  "mismatches": sum(bool(r["controller_coupled"]) and not r["couple_ok"] for r in rs),
+                  "pairs_coupled": sum(r.get("pairs_coupled", 0) for r in rs),
+                  "pairs_not_seated": sum(len(r.get("not_seated", [])) for r in rs)}
     return out

@@ -316,11 +316,14 @@ def assembly_table(summary):
     Bullet, lines that then drove 0.2 m, the median couple time, and how often the controller said
     "coupled" while Bullet found a pair not seated."""
     rows = ["| robots N | trials | coupled (checked in Bullet) | coupled and drove 0.2 m | median couple [s] | "
-            "controller said coupled, a pair not seated |", "|---|---|---|---|---|---|"]
+            "controller said coupled, a pair not seated | pairs held coupled: seated in Bullet |",
+            "|---|---|---|---|---|---|---|"]
     for n, s in sorted(summary.items()):
-        rows.append("| %d | %d | %d | %d | %s | %d |" % (
+        held, bad = s.get("pairs_coupled", 0), s.get("pairs_not_seated", 0)
+        rows.append("| %d | %d | %d | %d | %s | %d | %s |" % (
             n, s["trials"], s["couple_successes"], s["successes"],
-            "-" if s["median_couple_s"] is None else "%.1f" % s["median_couple_s"], s["mismatches"]))
+            "-" if s["median_couple_s"] is None else "%.1f" % s["median_couple_s"], s["mismatches"],
+            "%d of %d" % (held - bad, held) if held else "-"))
     return "\n".join(rows)
 
 

@@ -112,7 +112,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
             problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
             step_ok = state == SUCCEEDED and not problems
             steps.append({"behavior": step.behavior, "state": STATE_NAMES.get(state, str(state)),
-                          "sim_seconds": round(elapsed, 2), "ok": step_ok,
+                          "sim_seconds": round(elapsed, 2), "ok": step_ok, "coupled_pairs": len(coupled),
                           "problems": problems, "message": message[:160]})
             if not step_ok:
                 ok = False
@@ -134,7 +134,9 @@ def run_task(task):
 
 
 def summarize(records, scenario_steps):
-    """trials, successes, and per step: how many trials got through it and its median time [s]."""
+    """trials, successes, and per step: how many trials got through it and its median time [s]; pairs_held:
+    the pairs the controller held coupled at the end of a step, summed over every step of every trial, and
+    pairs_not_seated: how many of them Bullet found not seated (the controller's belief against the physics)."""
     per_step = []
     for k, step in enumerate(scenario_steps):
         done = [r["steps"][k] for r in records if len(r["steps"]) > k]
@@ -142,7 +144,10 @@ def summarize(records, scenario_steps):
         per_step.append({"step": step.describe(), "reached": len(done), "succeeded": len(ok),
                          "median_s": round(float(np.median([s["sim_seconds"] for s in ok])), 2) if ok else None,
                          "max_s": round(max(s["sim_seconds"] for s in ok), 2) if ok else None})
+    held = sum(st.get("coupled_pairs", 0) for r in records for st in r["steps"])
+    not_seated = sum(1 for r in records for st in r["steps"] for p in st.get("problems", []) if "not seated" in p)
     return {"trials": len(records), "successes": sum(r["success"] for r in records),
+            "pairs_held": held, "pairs_not_seated": not_seated,
             "failed_trials": sorted(r["trial"] for r in records if not r["success"]),
             "failed_mpc_steps": int(sum(r["failed_mpc_steps"] for r in records)), "steps": per_step}
 

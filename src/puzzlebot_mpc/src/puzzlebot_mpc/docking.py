@@ -110,8 +110,9 @@ class DockingSettings:
     backoff_time: float = 0.8         # s
     aim_step: float = 0.002           # m: after a jammed push, aim the mouth this much further to the side
     aim_max: float = 0.004            # m: ... up to this far off the partner's axis
-    stall_time: float = 8.0           # s: an approach (head not yet in the mouth) that has not come
+    stall_time: float = 0.0           # s: an approach (head not yet in the mouth) that has not come
     #                                   stall_progress closer in this long has stalled: back off, then again
+    #                                   (0: off; measured with 8 s, line8 seed 11: 1 of 8 either way)
     stall_progress: float = 0.005     # m: ... (distance of C_a from the mouth plus 20 mm per rad of heading error)
     repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
@@ -122,7 +123,7 @@ class DockingSettings:
         for name in self.__dataclass_fields__:
             if name in ("pull_test", "insert_by_mpc"):
                 continue
-            value, least = getattr(self, name), 0.0 if name in ("repush_gap",) else 1e-12
+            value, least = getattr(self, name), 0.0 if name in ("repush_gap", "stall_time") else 1e-12
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
                 raise ConfigError("%s.dock_%s: must be a number > 0, got %r" % (where, name, value))
         if not self.seat_pull_min < self.seat_pull_max:
@@ -207,6 +208,8 @@ class Docking:
         partner at a steep angle). The mover then backs off (``backoff_*``), turning to its partner's
         heading, and approaches again from there."""
         s = self.s
+        if s.stall_time <= 0:
+            return False
         d = math.hypot(max(gap, 0.0), lateral - self.aim) + 0.02 * abs(dtheta)
         if self.best is None or d < self.best - s.stall_progress or now is None or self.best_at is None:
             self.best, self.best_at = d, now

@@ -126,7 +126,7 @@ class MPCSettings:
     dock_aim_step: float = _DOCK.aim_step         # m: after a jammed push, aim the mouth this much to the side ...
     dock_aim_max: float = _DOCK.aim_max           # m: ... up to this far off the partner's axis
     dock_backoff_time: float = _DOCK.backoff_time # s
-    dock_stall_time: float = _DOCK.stall_time     # s: an approach no closer in this long: back off, again
+    dock_stall_time: float = _DOCK.stall_time     # s: an approach no closer in this long: back off, again (0: off)
     dock_stall_progress: float = _DOCK.stall_progress  # m: ... by this much
     dock_repair_gap: float = _DOCK.repair_gap     # m: a coupled pair with its faces this far apart ...
     dock_repair_time: float = _DOCK.repair_time   # s: ... for this long is re-seated (while a couple runs)
