@@ -32,12 +32,13 @@ def test_a_pair_cycle_run_is_checked_in_bullet_step_by_step():
 
 def test_summary_counts_steps_reached_and_passed():
     steps = scenario_steps(SCENARIOS, "couple4_line")
-    ok = {"behavior": "x", "ok": True, "sim_seconds": 10.0, "problems": []}
+    ok = {"behavior": "x", "ok": True, "sim_seconds": 10.0, "problems": [], "coupled_pairs": 3}
     bad = dict(ok, ok=False, problems=["pz1-pz2 not seated"])
     records = [{"trial": 0, "success": True, "steps": [ok, ok, ok], "failed_mpc_steps": 0},
                {"trial": 1, "success": False, "steps": [ok, bad], "failed_mpc_steps": 0}]
     s = summarize(records, steps)
     assert (s["trials"], s["successes"], s["failed_trials"]) == (2, 1, [1])
+    assert (s["pairs_held"], s["pairs_not_seated"]) == (15, 1)
     assert [(x["reached"], x["succeeded"]) for x in s["steps"]] == [(2, 2), (2, 1), (1, 1)]
     assert "| couple all robots into line | 2 | 2 | 10.0 | 10.0 |" in format_table(s)
 
@@ -63,3 +64,29 @@ def test_failure_text_whole_words_and_short_timeouts():
     assert text.startswith("timeout (90 s): not coupled: anchor pz1->pz2 (decoupled)")
     assert len(text) <= 99 and text.endswith(" ...") and "(head_al" not in text.replace("(head_aligned)", "")
     assert failure_text("pz1-pz3 not seated") == "pz1-pz3 not seated"
+
+
+def test_set_overrides_are_checked_and_reach_the_controller(monkeypatch):
+    from puzzlebot_experiments import scenario_trials as st
+
+    assert st.parse_overrides(["dock_pull_test=true", "insert_timeout=2.5"]) == \
+        {"dock_pull_test": True, "insert_timeout": 2.5}
+    for bad, match in (("no_such_setting=1", "no_such_setting"), ("insert_timeout", "KEY=VALUE"),
+                       ("insert_timeout=-1", "insert_timeout")):
+        with pytest.raises(ConfigError, match=match):
+            st.parse_overrides([bad])
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def closed_loop(world, names=None, settings=None):
+        seen.append(settings)
+        raise Stop
+
+    monkeypatch.setattr(st, "ClosedLoop", closed_loop)
+    with pytest.raises(Stop):
+        st.run_task((SCENARIOS, "pair_cycle", 1, 0, {"dock_pull_test": True, "insert_timeout": 2.5}))
+    assert seen[0].dock_pull_test is True and seen[0].insert_timeout == 2.5
+    assert seen[0].docking_settings().pull_test is True

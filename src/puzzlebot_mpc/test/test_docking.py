@@ -10,7 +10,7 @@ from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc.pairs import ANCHOR, make_pair
 
-S = dk.DockingSettings()
+S = dk.DockingSettings(pull_test=True)       # the full manoeuvre: push, pull, push home again
 DT = 0.1
 
 
@@ -63,14 +63,17 @@ def test_the_push_waits_for_a_lined_up_pair():
 
 
 @pytest.mark.parametrize("mover, sign", [("j", 1.0), ("i", -1.0)])
-def test_commands_point_into_the_partner_and_turn_to_its_heading(mover, sign):
+def test_commands_point_into_the_partner_and_hold_its_heading_at_the_start(mover, sign):
     d = dk.Docking(S, mover=mover, start=dk.PUSH, now=0.0)
-    c = d.command(0.1)
+    c = d.command(0.2, 0.3)                     # mover heading, partner heading
     assert c.v == pytest.approx(sign * S.push_speed) and c.w == pytest.approx(S.push_heading_gain * 0.1)
-    d.phase = dk.PULL
-    assert d.command(0.0).v == pytest.approx(-sign * S.pull_speed)
-    d.phase = dk.APPROACH
-    assert d.command(0.0) is None
+    c = d.command(0.2, 0.6)                     # the contact turns the partner: the push keeps its course
+    assert c.w == pytest.approx(S.push_heading_gain * 0.1)
+    d._to(dk.PULL, 1.0)
+    c = d.command(0.2, 0.6)                     # a new phase takes the partner's heading again
+    assert c.v == pytest.approx(-sign * S.pull_speed) and c.w == pytest.approx(S.push_heading_gain * 0.4)
+    d._to(dk.APPROACH, 2.0)
+    assert d.command(0.0, 0.0) is None
 
 
 def test_seat_measure_reads_gap_lateral_and_heading_off_the_poses():
@@ -94,7 +97,21 @@ def test_the_monitor_wants_a_reseat_only_after_the_pair_looked_open_for_a_while(
     assert not m.update(0.005, 0.0, 0.1)                 # open, just now
     assert not m.update(0.001, 0.0, 0.2)                 # closed again: forgiven
     times = np.arange(0.3, 0.3 + S.repair_time + 0.05, DT)
-    assert [m.update(0.001, 0.003, t) for t in times][-1]     # off its axis for repair_time
+    assert [m.update(0.005, 0.0, t) for t in times][-1]       # open for repair_time
+    assert not dk.SeatMonitor(S).update(0.001, 0.004, 0.0)    # off its axis alone: not a sign
+
+
+def test_a_jammed_push_aims_the_next_approach_to_the_side_it_was_pushed():
+    d = dk.Docking(S, start=dk.PUSH, now=0.0)
+    n = int(S.push_timeout / DT) + 2
+    run(d, [0.011] * n, lateral=0.006)               # pushed aside: the partner's C_a 6 mm to the left
+    assert d.phase == dk.BACKOFF and d.aim == pytest.approx(-S.aim_step)
+    assert not d.ready_to_push(0.012, 0.0, 0.0)       # the approach must now bring C_a across the axis ...
+    assert d.ready_to_push(0.012, -S.aim_step, 0.0)   # ... to the aim
+    for k in range(5):
+        d._to(dk.PUSH, 10.0 + k)
+        d.update(0.011, 0.006, 0.0, 10.0 + k + S.push_timeout)
+    assert d.aim == pytest.approx(-S.aim_max)         # never further than aim_max
 
 
 def test_bad_settings_are_clear_errors():
@@ -104,3 +121,24 @@ def test_bad_settings_are_clear_errors():
         dk.DockingSettings(seat_pull_min=0.02).check()
     with pytest.raises(ConfigError, match="must reach past"):
         dk.DockingSettings(pull_speed=0.005).check()
+
+
+def test_an_approach_that_comes_no_closer_backs_off_and_one_that_closes_in_does_not():
+    off = dk.Docking(dk.DockingSettings(), now=0.0)           # off by default
+    assert not any(off.approach_stalled(0.010, 0.014, 1.0, k * DT) for k in range(300))
+    s = dk.DockingSettings(stall_time=8.0)
+    d = dk.Docking(s, mover="j", now=0.0)
+    steps = int(s.stall_time / DT)
+    # closing in 1 mm per second: progress, never a stall
+    assert not any(d.approach_stalled(0.040 - 0.0001 * k, 0.010, 0.5, k * DT) for k in range(2 * steps))
+    # stuck beside the partner (10 mm out, 14 mm aside, 1 rad askew, jittering by 1 mm): a stall after stall_time
+    d = dk.Docking(s, mover="j", now=0.0)
+    stalled = [d.approach_stalled(0.010 + 0.001 * (k % 2), 0.014, 1.0, k * DT) for k in range(steps + 2)]
+    assert stalled.index(True) == steps and d.phase == dk.BACKOFF and "stalled" in d.note
+    v, w = d.command(mover_heading=0.0, partner_heading=1.0).v, d.command(0.0, 1.0).w
+    assert v < 0 and w > 0                                # backs away from the partner, turning to its heading
+    t = (steps + 2) * DT
+    for k in range(int(s.backoff_time / DT) + 1):
+        d.update(0.03, 0.014, 1.0, t + k * DT)
+    assert d.phase == dk.APPROACH                        # a fresh approach, its progress measured anew:
+    assert d.best_at is None or d.best_at >= steps * DT + s.backoff_time - 1e-9

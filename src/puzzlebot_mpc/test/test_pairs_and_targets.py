@@ -97,26 +97,51 @@ def test_pairbook_moves_inserted_pairs_to_coupled_and_watches_them():
     assert lost == [pair] and not book.coupled and pair.status == pr.DECOUPLED
 
 
-def test_active_pairs_are_conflict_free_and_grow_one_assembly():
+def test_active_pairs_run_in_parallel_without_conflicts():
+    names = ["r%d" % k for k in range(1, 9)]
+    chain = [pr.make_pair(a, b, pr.ANCHOR, GEO) for a, b in zip(names[:-1], names[1:])]
+    poses = {n: (0.0, 0.0, 0.0) for n in names}
+    book = pr.PairBook(GEO, EPS, 0.005)
+    book.set_goals(chain)
+    # no assembly yet: every seed that shares no robot, at once
+    assert [p.key for p in book.assign_active(poses)] == [("r1", "r2"), ("r3", "r4"), ("r5", "r6"), ("r7", "r8")]
+    assert all(book.mover(p) == "j" for p in book.active)
+    for k in (0, 2, 4, 6):
+        book.add_coupled(chain[k])
+        book.goals.remove(chain[k])
+    # four chains of two: r3-r4 docks forward onto r1-r2 and r7-r8 onto r5-r6; r3-r4 moving, nothing docks
+    # onto it (r4->r5 waits), and r5-r6, holding, is not moved
+    assert [p.key for p in book.assign_active(poses)] == [("r2", "r3"), ("r6", "r7")]
+    assert [book.mover(p) for p in book.active] == ["j", "j"]
+
+
+def test_single_robots_grow_assemblies_first_and_an_assembly_takes_several_at_once():
     names = ["r1", "r2", "r3", "r4", "r5"]
     chain = [pr.make_pair(a, b, pr.ANCHOR, GEO) for a, b in zip(names[:-1], names[1:])]
-    book = pr.PairBook(GEO, EPS, 0.005)
-    priority = {p.key: k for k, p in enumerate([chain[2], chain[0], chain[1], chain[3]])}
-    book.set_goals(chain, priority)
     poses = {n: (0.0, 0.0, 0.0) for n in names}
-    assert book.assign_active(poses) == [chain[2]]            # before any assembly: the best pair only
-    book.add_coupled(chain[2])
-    book.goals.remove(chain[2])
-    active = book.assign_active(poses)                       # grow r3-r4 at both ends, in parallel
-    assert set(p.key for p in active) == {chain[1].key, chain[3].key}
+    book = pr.PairBook(GEO, EPS, 0.005)
+    book.add_coupled(chain[1])                                  # r2-r3
+    book.set_goals([chain[0], chain[2], chain[3]], {chain[3].key: 0, chain[2].key: 1, chain[0].key: 2})
+    active = book.assign_active(poses)
+    # r1 and r4 dock onto r2-r3 at both ends (grow before seed r4-r5, which shares r4)
+    assert sorted(p.key for p in active) == [("r1", "r2"), ("r3", "r4")]
+    assert book.mover(chain[0]) == "i" and book.mover(chain[2]) == "j"
     robots = [r for p in active for r in p.robots]
     assert len(robots) == len(set(robots))
-    # two multi-robot assemblies are never joined
-    book2 = pr.PairBook(GEO, EPS, 0.005)
-    book2.add_coupled(chain[0])
-    book2.add_coupled(chain[2])
-    book2.set_goals([chain[1], chain[3]])
-    assert book2.assign_active(poses) == [chain[3]]
+    book.active = [chain[3]]                                    # a pair being aligned keeps its place
+    assert chain[3] in book.assign_active(poses)
+
+
+def test_a_pair_inside_one_assembly_holds_on_both_sides():
+    a, b, c, d = "a", "b", "c", "d"
+    pairs = [pr.make_pair(a, b, pr.ANCHOR, GEO), pr.make_pair(c, d, pr.ANCHOR, GEO),
+             pr.make_pair(c, a, pr.KNOB, GEO), pr.make_pair(d, b, pr.KNOB, GEO)]
+    book = pr.PairBook(GEO, EPS, 0.005)
+    for p in pairs[:3]:
+        book.add_coupled(p)
+    book.set_goals([pairs[3]])
+    assert book.assign_active({n: (0.0, 0.0, 0.0) for n in "abcd"}) == [pairs[3]]
+    assert book.mover(pairs[3]) is None
 
 
 # ------------------------------------------------------------------- targets
@@ -210,3 +235,15 @@ def test_mst_matches_brute_force_total_weight():
         best = min(best, w)
     assert total == pytest.approx(best, rel=1e-9)
     assert len(edges) == 4 and np.all(np.isfinite(paths))
+
+
+def test_the_grid_generator_is_two_lines_joined_by_knobs():
+    grid = make_target("grid", generate("grid", 8, GEO), GEO)
+    anchors = sorted((a, b) for a, b, kind in grid.connections if kind == pr.ANCHOR)
+    knobs = sorted((a, b) for a, b, kind in grid.connections if kind == pr.KNOB)
+    assert anchors == [(0, 1), (1, 2), (2, 3), (4, 5), (5, 6), (6, 7)]
+    # the second line is on the first's left (+y): its robots' right holes take the first line's left knobs
+    assert knobs == [(0, 4), (1, 5), (2, 6), (3, 7)]
+    for n in (3, 5, 2):
+        with pytest.raises(TargetError, match="even number of robots, at least 4"):
+            generate("grid", n, GEO)

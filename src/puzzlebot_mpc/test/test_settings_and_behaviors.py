@@ -81,8 +81,10 @@ def test_unrequested_robots_are_stopped():
     assert o.velocity[0] == pytest.approx([0, 0]) and o.velocity[2] == pytest.approx([0, 0])
 
 
-def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home():
-    settings = MPCSettings()
+@pytest.mark.parametrize("docking", [False, True])
+def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking):
+    # docking=True here is the straight push of puzzlebot_mpc.docking (dock_insert_by_mpc false)
+    settings = MPCSettings(docking=docking, dock_insert_by_mpc=not docking)
     m = BehaviorManager(["pz1", "pz2"], settings)
 
     def step(now, poses):              # as control_loop.ControlLoop.step does
@@ -100,7 +102,16 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home():
     mask = step(0.2, inside)
     assert pair.status == 1                                            # head_aligned
     assert mask[m.index[a]] == pytest.approx([math.sqrt(settings.hold_scale)] * 2)   # a holds still
-    assert mask[m.index[o]] == pytest.approx([0.0, 0.0])                              # o pushes
+    if not docking:
+        assert mask[m.index[o]] == pytest.approx([0.0, 0.0])          # o pushes: the MPC's alignment cost
+        return
+    # the docking manoeuvre pushes o straight in: its command is sent as is, the MPC tracks it, and the
+    # pair's alignment cost is off while it does
+    obj = m.objectives(0.2, inside)
+    assert m.pairs.docking[pair.key].phase == "push"
+    assert obj.open_loop[m.index[o]] == pytest.approx((settings.dock_push_speed, 0.0))
+    assert mask[m.index[o]] == pytest.approx([1.0, 1.0])
+    assert not [p for p in obj.pairs if p.active]
 
 
 # ------------------------------------------------- decouple: the partner turns the other way

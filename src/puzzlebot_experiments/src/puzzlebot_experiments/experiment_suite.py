@@ -4,7 +4,8 @@
 2. decoupling (``decouple``);
 3. MPC compute time vs robots and Hm (the benchmark JSON of ``make bench``);
 4. the anchor force profile (puzzlebot_experiments.rig, the simulated probe);
-5. the chain of three down the step (puzzlebot_experiments.trials.chain_step_trial).
+5. the chain of three down the step (puzzlebot_experiments.trials.chain_step_trial);
+6. lines of 2 to 16 scattered robots through the MPC (puzzlebot_experiments.assembly).
 
 Trials are kept in one append-only results file, so an interrupted run
 continues where it stopped; then the figures are drawn and the generated
@@ -134,6 +135,17 @@ def _run(args, executor, out):
     blocks["chain_table"] = page.chain_table(chain)
     page.chain_figure(chain, os.path.join(args.img, "results_chain.png"))
 
+    if args.assembly_trials:
+        from puzzlebot_experiments import assembly
+
+        t = time.monotonic()
+        sizes = [int(v) for v in str(args.assembly_sizes).split(",") if v.strip()]
+        lines = assembly.assembly_sweep(sizes, args.assembly_trials, args.seed, executor, args.results)
+        summary["assembly_wall_s"] = round(time.monotonic() - t, 1)
+        summary["assembly"] = assembly.summarize(lines)
+        blocks["assembly_table"] = page.assembly_table(summary["assembly"])
+        page.assembly_figure(summary["assembly"], os.path.join(args.img, "results_assembly.png"))
+
     summary["wall_s"] = round(time.monotonic() - t0, 1)
     blocks["run_info"] = run_info(summary)
     if args.page:
@@ -152,5 +164,6 @@ def run_info(s):
         "| machine | %s, %d cores, Python %s, load average %s at the end |" % (
             m["cpu"], m["cores"] or 0, m["python"], m["load_avg_1_5_15"]),
         "| trials ran on | %s |" % s.get("executor", "a local process pool"),
-        "| wall time | coupling %.0f s, decoupling %.0f s, chain %.0f s, all %.0f s (trials already in the "
-        "results file are not rerun) |" % (s["couple_wall_s"], s["decouple_wall_s"], s["chain_wall_s"], s["wall_s"])])
+        "| wall time | coupling %.0f s, decoupling %.0f s, chain %.0f s, lines %.0f s, all %.0f s (trials already "
+        "in the results file are not rerun) |" % (s["couple_wall_s"], s["decouple_wall_s"], s["chain_wall_s"],
+                                                 s.get("assembly_wall_s", 0.0), s["wall_s"])])

@@ -311,6 +311,47 @@ def chain_figure(records, path):
     _finish(fig, (a1, a2), path)
 
 
+def assembly_table(summary):
+    """Per line size N (puzzlebot_experiments.assembly.summarize): trials, lines coupled and checked in
+    Bullet, lines that then drove 0.2 m, the median couple time, and how often the controller said
+    "coupled" while Bullet found a pair not seated."""
+    rows = ["| robots N | trials | coupled (checked in Bullet) | coupled and drove 0.2 m | median couple [s] | "
+            "controller said coupled, a pair not seated | pairs held coupled: seated in Bullet |",
+            "|---|---|---|---|---|---|---|"]
+    for n, s in sorted(summary.items()):
+        held, bad = s.get("pairs_coupled", 0), s.get("pairs_not_seated", 0)
+        rows.append("| %d | %d | %d | %d | %s | %d | %s |" % (
+            n, s["trials"], s["couple_successes"], s["successes"],
+            "-" if s["median_couple_s"] is None else "%.1f" % s["median_couple_s"], s["mismatches"],
+            "%d of %d" % (held - bad, held) if held else "-"))
+    return "\n".join(rows)
+
+
+def assembly_figure(summary, path, paper=(2, 8)):
+    """Success rate and median couple time against the line size, the paper's reach shaded."""
+    plt = _plt()
+    ns = sorted(summary)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    for ax in (a1, a2):
+        ax.axvspan(paper[0] - 0.5, paper[1] + 0.5, color="0.9", zorder=0,
+                   label="the paper's lines (%d-%d robots)" % paper)
+    a1.plot(ns, [summary[n]["couple_successes"] / summary[n]["trials"] for n in ns], "o-", color="C0",
+            label="coupled, checked in Bullet")
+    a1.plot(ns, [summary[n]["successes"] / summary[n]["trials"] for n in ns], "s--", color="C2",
+            label="coupled and drove 0.2 m")
+    a1.set_ylim(-0.05, 1.05)
+    a1.set_xlabel("robots in the line")
+    a1.set_ylabel("share of trials")
+    timed = [n for n in ns if summary[n]["median_couple_s"] is not None]
+    a2.plot(timed, [summary[n]["median_couple_s"] for n in timed], "o-", color="C1",
+            label="median couple time (successes)")
+    a2.set_xlabel("robots in the line")
+    a2.set_ylabel("simulated time [s]")
+    for ax in (a1, a2):
+        ax.set_xticks(ns)
+    _finish(fig, (a1, a2), path)
+
+
 # -------------------------------------------------------------------- page
 _BLOCK = re.compile(r"(<!-- BEGIN (?P<name>[a-z_]+) -->\n)(?P<body>.*?)(<!-- END (?P=name) -->)", re.S)
 

@@ -18,8 +18,12 @@ A trial succeeds when every step does; it stops at the first failed step.
 """
 
 import numpy as np
+import yaml
+
+from puzzlebot_common.errors import ConfigError
 
 from puzzlebot_common.robots import parse_robot_list
+from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
 from puzzlebot_sim.coupling import HEAD_ALIGNED, HEAD_INSERTED
@@ -61,10 +65,28 @@ def physical_problems(cl, step, coupled, body_side):
     return problems
 
 
-def run_trial(directory, scenario, seed, trial, cfg=None):
+def parse_overrides(items):
+    """{setting: value} of ``KEY=VALUE`` texts (values read as YAML scalars: 0.002, true, active_set);
+    raises ConfigError on a malformed item or a setting MPCSettings does not have or accept."""
+    out = {}
+    for item in items or ():
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set %r: expected KEY=VALUE (an MPC setting, e.g. dock_pull_test=true)" % item)
+        try:
+            out[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError as e:
+            raise ConfigError("--set %s: %s" % (item, e))
+    if out:
+        load_settings(sim=True, overrides=out)         # unknown keys, wrong types, ranges: a clear error now
+    return out
+
+
+def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
     """One run of ``scenario`` (from ``directory``); returns a JSON-able record.
 
     ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
+    ``overrides``: MPC settings on top of mpc.yaml + mpc_sim.yaml (:func:`parse_overrides`).
     """
     cfg = cfg or load_sim_config(mocap=MOCAP)
     wseed = world_seed(seed, trial)
@@ -77,7 +99,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
     steps, ok = [], True
     try:
         w.run(SETTLE_AT_START)
-        cl = ClosedLoop(w, names=names)
+        cl = ClosedLoop(w, names=names, settings=load_settings(sim=True, overrides=overrides))
         for step in sc.steps:
             req = request_of(step)
             limit = (step.timeout or 60.0) + SETTLE
@@ -90,7 +112,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
             problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
             step_ok = state == SUCCEEDED and not problems
             steps.append({"behavior": step.behavior, "state": STATE_NAMES.get(state, str(state)),
-                          "sim_seconds": round(elapsed, 2), "ok": step_ok,
+                          "sim_seconds": round(elapsed, 2), "ok": step_ok, "coupled_pairs": len(coupled),
                           "problems": problems, "message": message[:160]})
             if not step_ok:
                 ok = False
@@ -98,17 +120,23 @@ def run_trial(directory, scenario, seed, trial, cfg=None):
         failed_steps = cl.failed_steps
     finally:
         w.close()
-    return {"scenario": scenario, "seed": seed, "trial": trial, "success": ok, "steps": steps,
-            "failed_mpc_steps": failed_steps}
+    rec = {"scenario": scenario, "seed": seed, "trial": trial, "success": ok, "steps": steps,
+           "failed_mpc_steps": failed_steps}
+    if overrides:
+        rec["mpc_overrides"] = dict(overrides)
+    return rec
 
 
 def run_task(task):
-    """run_trial for a (directory, scenario, seed, trial) tuple (a worker process's entry point)."""
-    return run_trial(*task)
+    """run_trial for a (directory, scenario, seed, trial[, overrides]) tuple (a worker process's entry point)."""
+    directory, scenario, seed, trial = task[:4]
+    return run_trial(directory, scenario, seed, trial, overrides=task[4] if len(task) > 4 else None)
 
 
 def summarize(records, scenario_steps):
-    """trials, successes, and per step: how many trials got through it and its median time [s]."""
+    """trials, successes, and per step: how many trials got through it and its median time [s]; pairs_held:
+    the pairs the controller held coupled at the end of a step, summed over every step of every trial, and
+    pairs_not_seated: how many of them Bullet found not seated (the controller's belief against the physics)."""
     per_step = []
     for k, step in enumerate(scenario_steps):
         done = [r["steps"][k] for r in records if len(r["steps"]) > k]
@@ -116,7 +144,10 @@ def summarize(records, scenario_steps):
         per_step.append({"step": step.describe(), "reached": len(done), "succeeded": len(ok),
                          "median_s": round(float(np.median([s["sim_seconds"] for s in ok])), 2) if ok else None,
                          "max_s": round(max(s["sim_seconds"] for s in ok), 2) if ok else None})
+    held = sum(st.get("coupled_pairs", 0) for r in records for st in r["steps"])
+    not_seated = sum(1 for r in records for st in r["steps"] for p in st.get("problems", []) if "not seated" in p)
     return {"trials": len(records), "successes": sum(r["success"] for r in records),
+            "pairs_held": held, "pairs_not_seated": not_seated,
             "failed_trials": sorted(r["trial"] for r in records if not r["success"]),
             "failed_mpc_steps": int(sum(r["failed_mpc_steps"] for r in records)), "steps": per_step}
 

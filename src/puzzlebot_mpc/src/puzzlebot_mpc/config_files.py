@@ -15,17 +15,22 @@ def config_path(name):
     return shipped_config("puzzlebot_mpc", name)
 
 
-def load_settings(path=None, sim=False):
+def load_settings(path=None, sim=False, overrides=None):
     """MPCSettings from config/mpc.yaml (key ``mpc``), checked.
 
     ``sim``: with the simulation's overrides, config/mpc_sim.yaml, on top, as
-    sim.launch loads them (lab.launch loads mpc.yaml alone).
+    sim.launch loads them (lab.launch loads mpc.yaml alone). ``overrides``:
+    a mapping of settings applied last (e.g. an experiment's ``--set``),
+    checked as the files are.
     """
     paths = [path or config_path("mpc.yaml")] + ([config_path("mpc_sim.yaml")] if sim else [])
     data = {}
     for p in paths:
         data.update(load_section(p, "mpc", required=p == paths[0]))
     where = "%s: mpc" % " + ".join(paths)
+    if overrides:
+        data.update(overrides)
+        where += " + overrides %s" % ", ".join(sorted(overrides))
     settings = MPCSettings.from_dict(data, where=where)
     settings.check(where=where)
     return settings

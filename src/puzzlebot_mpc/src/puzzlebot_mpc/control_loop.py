@@ -112,7 +112,7 @@ class ControlLoop:
         self.geometry = geometry or RobotGeometry()
         self.poses = PoseBook(self.names, settings.pose_timeout, settings.hardware_v_max, settings.hardware_w_max,
                               pose_gate)
-        self.pairs = PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating())
+        self.pairs = PairBook.from_settings(self.geometry, settings)
         self.behaviors = BehaviorManager(self.names, settings, self.geometry, self.pairs, targets)
         self._pending = []              # (request id, BehaviorRequest) waiting to start, in order
         self.mpc = MultiRobotMPC(settings, len(self.names)).setup()

@@ -1,36 +1,62 @@
-"""Seating an anchor pair and proving it seated, from what the hardware has: poses, commands, time.
+"""Seating an anchor pair and keeping it seated, from what the hardware has: poses, commands, time.
 
 The MPC brings an anchor pair's head to the partner's mouth (the *approach*,
-Algorithm 2's decoupled -> head_aligned). From there the geometry of the
-poses can no longer tell a seated anchor from one whose barb sits on the
-lip: both leave the robots face to face. What tells them apart is how the
-pair answers a pull. A robot cannot pull a seated anchor out (the barbs
-hold 0.6 N at 4 mm, a robot pushes 0.5 N: facts.md), so the pair stretches
-by the anchor's travel in its holder plus the barbs' give, then stalls; an
-anchor that is not behind the lips gives way further, or not at all when a
-barb is folded against the head. :class:`Docking` runs one pair through
+Algorithm 2's decoupled -> head_aligned). What happens from there is chosen
+by two settings:
+
+- ``insert_by_mpc`` (default): the MPC pushes the anchor home itself
+  (Algorithm 2's head_aligned -> head_inserted, with its lining-up test,
+  ``insert_*`` in MPCSettings). A push that stays head_aligned for
+  ``insert_timeout`` has jammed: the barb sits on the lip. The pair backs
+  off and :meth:`Docking.jammed` aims the next approach ``aim_step`` to the
+  side the mover was pushed (the anchor turns freely in its holder, so the
+  head is not where the partner's pose puts it), up to ``aim_max``.
+- ``insert_by_mpc`` false: this module drives the mover straight in (the
+  ``push`` phase below) and backs it off after ``push_timeout``.
+
+With ``pull_test`` the pair is pulled on once home: a robot cannot pull a
+seated anchor out (the barbs hold 0.6 N at 4 mm, a robot pushes 0.5 N:
+facts.md), so a seated pair stretches by the anchor's travel in its holder
+plus the barbs' give, then stalls; an anchor not behind the lips gives way
+further, or not at all when a barb is folded against the head. Off by
+default: measured, the pull unseated more pairs than it caught
+(docs/mpc.md, "Seating").
+
+Whatever seated it, a coupled pair is then watched (:class:`SeatMonitor`):
+faces more than ``repair_gap`` apart for ``repair_time`` (a pair pushed out
+of its slits by robots docking elsewhere) -> re-seated from ``push`` while
+a couple runs. The phases of one pair's manoeuvre (:class:`Docking`):
 
 =========  ==============================================================
 phase      what the mover (the robot that docks) does
 =========  ==============================================================
 approach   the MPC aligns the pair (alignment cost, approach carrot)
 push       drives straight into the partner at ``push_speed``, holding
-           the partner's heading (the mouth and the anchor's free yaw do
-           the last millimetres); "home" when the gap between the faces is
-           below ``home_gap`` for ``home_steps`` steps
-pull       backs away at ``pull_speed`` for ``pull_time``: the gap must
-           grow by ``seat_pull_min`` .. ``seat_pull_max`` (the seated band)
-repush     drives home again (the pull leaves the anchor part way out)
+           the heading the partner had when the push began (the mouth and
+           the anchor's free yaw do the last millimetres; chasing a partner
+           that the contact turns would turn the pair together); "home"
+           when the gap between the faces is below ``home_gap`` for
+           ``home_steps`` steps
+pull       backs away at ``pull_speed`` for at most ``pull_time``: the gap
+           must grow by ``seat_pull_min`` .. ``seat_pull_max`` (the seated
+           band) and stall there (the pull ends early once it has; it fails
+           early once the gap has grown past the band)
+repush     drives home again at ``repush_speed`` (the pull leaves the anchor
+           part way out, its barbs behind the lips: a gentle push seats it,
+           a hard one can knock a barb out again)
 backoff    backs away at ``backoff_speed`` for ``backoff_time``, then
            approaches again: after a push that did not get home
-           (``push_timeout``) or a pull outside the band
+           (``push_timeout``) or a pull outside the band. A push that jams
+           leaves the mover pushed aside by the head, towards the side the
+           head sits on (the anchor turns freely in its holder, so the head
+           is not where the partner's pose puts it): the next approach aims
+           the mouth ``aim_step`` further to that side (up to ``aim_max``)
 seated     the pair is coupled (the controller's head_inserted)
 =========  ==============================================================
 
 The mover's partner (and its assembly) holds still throughout. A pair that
 was seated and is later found open (:func:`seat_measure`: gap above
-``home_gap`` or the anchor point off the opening's axis by more than
-``repair_lateral`` for ``repair_time``) is re-seated from ``push``.
+``repair_gap`` for ``repair_time``) is re-seated from ``push``.
 
 The seated band is a property of the anchor and its holder: in the Bullet
 model a seated pair stretches 9.0-12.3 mm before it stalls; a barb folded
@@ -60,31 +86,45 @@ DRIVEN = (PUSH, PULL, REPUSH, BACKOFF)
 class DockingSettings:
     """How a pair is pushed home, tested and re-seated (MPCSettings ``dock_*``; units m, s, rad)."""
 
-    push_speed: float = 0.03          # m/s: straight push into the partner
+    push_speed: float = 0.05          # m/s: straight push into the partner (faster folds the barbs surer: 40/40 vs 38/40)
     push_heading_gain: float = 2.0    # 1/s: w = gain x (partner heading - mover heading) while pushing/pulling
     push_start_gap: float = 0.016     # m: the push starts once the faces are this close ...
-    push_lateral: float = 0.0025      # m: ... with C_a this close to the opening's axis ...
+    push_lateral: float = 0.0015      # m: ... with C_a this close to the opening's axis (or the aim) ...
     push_yaw: float = 0.12            # rad: ... and the headings this close
     push_timeout: float = 2.5         # s: not home after this long: back off
     home_gap: float = 0.003           # m: faces closer than this: pushed home
     home_steps: int = 3               # control steps the pair must be home in a row
+    insert_by_mpc: bool = True        # the MPC pushes the anchor in (Algorithm 2 and its lining-up test) and a
+    #                                   jam aims the next approach; false: the straight push of this module
+    pull_test: bool = False           # prove a pair pushed home seated by pulling on it (false: home is seated;
+    #                                   off by default: measured, it unseats more pairs than it catches)
     pull_speed: float = 0.02          # m/s: the pull test
     pull_time: float = 1.0            # s
     seat_pull_min: float = 0.0085     # m: a seated pair stretches at least this much under the pull ...
     seat_pull_max: float = 0.0135     # m: ... and at most this much
+    pull_stall: float = 0.0005        # m: the pull has stalled when the gap grew less than this in a step
+    repush_speed: float = 0.02        # m/s: the push home after the pull ...
+    repush_gap: float = 0.003         # m: ... until the faces are this close (0: no push after the pull)
     repush_timeout: float = 1.5       # s: back home after the pull within this
     backoff_speed: float = 0.03       # m/s
     backoff_time: float = 0.8         # s
-    repair_lateral: float = 0.0015    # m: a coupled pair with C_a this far off the opening's axis ...
-    repair_gap: float = 0.003         # m: ... or its faces this far apart ...
+    aim_step: float = 0.002           # m: after a jammed push, aim the mouth this much further to the side
+    aim_max: float = 0.004            # m: ... up to this far off the partner's axis
+    stall_time: float = 0.0           # s: an approach (head not yet in the mouth) that has not come
+    #                                   stall_progress closer in this long has stalled: back off, then again
+    #                                   (0: off; measured with 8 s, line8 seed 11: 1 of 8 either way)
+    stall_progress: float = 0.005     # m: ... (distance of C_a from the mouth plus 20 mm per rad of heading error)
+    repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
     def check(self, where="mpc"):
         from puzzlebot_common.errors import ConfigError
 
         for name in self.__dataclass_fields__:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if name in ("pull_test", "insert_by_mpc"):
+                continue
+            value, least = getattr(self, name), 0.0 if name in ("repush_gap", "stall_time") else 1e-12
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
                 raise ConfigError("%s.dock_%s: must be a number > 0, got %r" % (where, name, value))
         if not self.seat_pull_min < self.seat_pull_max:
             raise ConfigError("%s: dock_seat_pull_min (%g) must be below dock_seat_pull_max (%g)"
@@ -130,10 +170,17 @@ class Docking:
         self.pull_from = None         # gap when the pull started [m]
         self.last_growth = None       # stretch measured by the last pull [m]
         self.note = ""                # why the last phase change happened
+        self.aim = 0.0                # m: where the approach puts C_a across the opening's axis (j's frame, +y)
+        self.heading_ref = None       # rad: the heading a driven phase holds (the partner's at its start)
+        self.last_gap = None          # m: the gap at the previous update
+        self.best = None              # m: the approach's closest distance so far (approach_stalled) ...
+        self.best_at = None           # s: ... and when it was reached
+        self.stalls = 0               # approaches that stalled
 
     # ------------------------------------------------------------ helpers
     def _to(self, phase, now, note=""):
         self.phase, self.since, self.home_count, self.note = phase, now, 0, note
+        self.heading_ref = None
         if phase == PUSH:
             self.attempts += 1
 
@@ -145,32 +192,85 @@ class Docking:
         """+1 when "into the partner" is forward for the mover (the opening robot), -1 when backward."""
         return 1.0 if self.mover == "j" else -1.0
 
+    def jammed(self, gap, lateral, now):
+        """The MPC's own insertion (``insert_by_mpc``) pushed for its timeout without getting home: aim the
+        next approach to the side the mover was pushed (see the module docstring)."""
+        s = self.s
+        self.attempts += 1
+        self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+        self.best = self.best_at = None
+        self.note = "insertion %d jammed (%.1f mm out, %.1f mm aside); aiming %.1f mm across" % (
+            self.attempts, 1e3 * gap, 1e3 * lateral, 1e3 * self.aim)
+
+    def approach_stalled(self, gap, lateral, dtheta, now):
+        """During the approach (the head not yet in the mouth): True when the pair has come no closer than
+        ``stall_progress`` in ``stall_time`` (the MPC stuck in a local minimum, e.g. the mover beside its
+        partner at a steep angle). The mover then backs off (``backoff_*``), turning to its partner's
+        heading, and approaches again from there."""
+        s = self.s
+        if s.stall_time <= 0:
+            return False
+        d = math.hypot(max(gap, 0.0), lateral - self.aim) + 0.02 * abs(dtheta)
+        if self.best is None or d < self.best - s.stall_progress or now is None or self.best_at is None:
+            self.best, self.best_at = d, now
+            return False
+        if now - self.best_at < s.stall_time:
+            return False
+        self.stalls += 1
+        self._to(BACKOFF, now, "approach %d stalled %.0f mm away for %.0f s" % (
+            self.stalls, 1e3 * d, now - self.best_at))
+        self.best = self.best_at = None
+        return True
+
+    def start_pull(self, gap, now):
+        """The pair is pushed home (by the MPC): test it with the pull."""
+        self._to(PULL, now, "pushed home")
+        self.pull_from = gap
+
     def ready_to_push(self, gap, lateral, dtheta):
         """The approach has brought the pair close and lined up enough for a straight push."""
         s = self.s
-        return gap <= s.push_start_gap and abs(lateral) <= s.push_lateral and abs(dtheta) <= s.push_yaw
+        return gap <= s.push_start_gap and abs(lateral - self.aim) <= s.push_lateral and abs(dtheta) <= s.push_yaw
 
     # -------------------------------------------------------------- update
     def update(self, gap, lateral, dtheta, now):
         """Advance the phase from this step's measurement (seat_measure). Returns True when the pair has
         just been proven seated."""
+        if self.since is None:           # the first update of this phase (the pair was waiting its turn)
+            self.since = now
+        try:
+            return self._update(gap, lateral, dtheta, now)
+        finally:
+            self.last_gap = gap
+
+    def _update(self, gap, lateral, dtheta, now):
         s, phase, t = self.s, self.phase, self._elapsed(now)
         home = gap <= s.home_gap
         self.home_count = self.home_count + 1 if home else 0
         if phase == APPROACH:
             if self.ready_to_push(gap, lateral, dtheta):
                 self._to(PUSH, now, "lined up %.1f mm off axis, %.1f mm out" % (1e3 * lateral, 1e3 * gap))
+            else:
+                self.approach_stalled(gap, lateral, dtheta, now)
         elif phase == PUSH:
+            if self.home_count >= s.home_steps and not s.pull_test:
+                self._to(SEATED, now, "pushed home")
+                return True
             if self.home_count >= s.home_steps:
                 self._to(PULL, now, "pushed home")
                 self.pull_from = gap
             elif t >= s.push_timeout:
-                self._to(BACKOFF, now, "push %d did not get home (%.1f mm out after %.1f s)"
-                         % (self.attempts, 1e3 * gap, t))
+                self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+                self._to(BACKOFF, now, "push %d did not get home (%.1f mm out, pushed %.1f mm aside after %.1f s); "
+                         "aiming %.1f mm across" % (self.attempts, 1e3 * gap, 1e3 * lateral, t, 1e3 * self.aim))
         elif phase == PULL:
-            if t >= s.pull_time - 1e-9:
-                growth = gap - self.pull_from
+            growth = gap - self.pull_from
+            stalled = self.last_gap is not None and gap - self.last_gap < s.pull_stall
+            if growth > s.seat_pull_max or t >= s.pull_time - 1e-9 or (stalled and growth >= s.seat_pull_min):
                 self.last_growth = growth
+                if s.seat_pull_min <= growth <= s.seat_pull_max and s.repush_gap <= 0:
+                    self._to(SEATED, now, "seated (pull held at %.1f mm)" % (1e3 * growth))
+                    return True
                 if s.seat_pull_min <= growth <= s.seat_pull_max:
                     self._to(REPUSH, now, "pull held at %.1f mm: seated" % (1e3 * growth))
                 else:
@@ -178,26 +278,34 @@ class Docking:
                     self._to(BACKOFF, now, "pull stretched the pair %.1f mm (seated: %.1f-%.1f mm): %s"
                              % (1e3 * growth, 1e3 * s.seat_pull_min, 1e3 * s.seat_pull_max, why))
         elif phase == REPUSH:
+            if gap <= s.repush_gap and gap > s.home_gap:
+                self.home_count = s.home_steps
             if self.home_count >= s.home_steps:
                 self._to(SEATED, now, "seated (pull held at %.1f mm)" % (1e3 * self.last_growth))
+                self.last_gap = gap
                 return True
             if t >= s.repush_timeout:
                 self._to(BACKOFF, now, "not home again after the pull (%.1f mm out)" % (1e3 * gap))
         elif phase == BACKOFF:
             if t >= s.backoff_time - 1e-9:
                 self._to(APPROACH, now, self.note)
+                self.best = self.best_at = None
         return False
 
-    def command(self, dtheta_to_partner):
+    def command(self, mover_heading, partner_heading):
         """The mover's (v, w) in a driven phase (None in approach and seated: the MPC decides).
 
-        ``dtheta_to_partner``: partner heading - mover heading [rad]; the mover
-        turns towards it (a pair pushed askew leaves a barb out).
+        Headings [rad], world frame. The mover holds the heading its partner
+        had at the start of the phase (a pair pushed askew leaves a barb out).
         """
         s = self.s
-        w = max(-1.0, min(1.0, s.push_heading_gain * dtheta_to_partner))
-        if self.phase in (PUSH, REPUSH):
+        if self.heading_ref is None:
+            self.heading_ref = partner_heading
+        w = max(-1.0, min(1.0, s.push_heading_gain * math.remainder(self.heading_ref - mover_heading, 2 * math.pi)))
+        if self.phase == PUSH:
             return Command(self.sign * s.push_speed, w)
+        if self.phase == REPUSH:
+            return Command(self.sign * s.repush_speed, w)
         if self.phase == PULL:
             return Command(-self.sign * s.pull_speed, w)
         if self.phase == BACKOFF:
@@ -209,7 +317,9 @@ class Docking:
 
 
 class SeatMonitor:
-    """Watches a coupled anchor pair: open (gap) or off its axis (lateral) for ``repair_time`` -> re-seat."""
+    """Watches a coupled anchor pair: open (gap above ``repair_gap``) for ``repair_time`` -> re-seat. (How far
+    C_a is off the opening's axis does not tell: seated pairs were measured up to 4.5 mm off it, the anchor
+    turned in its holder.)"""
 
     def __init__(self, settings):
         self.s = settings
@@ -218,7 +328,7 @@ class SeatMonitor:
     def update(self, gap, lateral, now):
         """True when the pair has looked open or askew for ``repair_time``: it needs re-seating."""
         s = self.s
-        if gap > s.repair_gap or abs(lateral) > s.repair_lateral:
+        if gap > s.repair_gap:
             if self.bad_since is None:
                 self.bad_since = now
             return now - self.bad_since >= s.repair_time - 1e-9

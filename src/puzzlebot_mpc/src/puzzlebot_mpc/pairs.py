@@ -56,6 +56,8 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from puzzlebot_common.geometry import inverse_transform_point, signed_margin, transform_point
+from puzzlebot_mpc.docking import APPROACH, BACKOFF, DRIVEN, PUSH, Docking, DockingSettings, SeatMonitor, \
+    seat_measure
 
 ANCHOR, KNOB = 0, 1                                  # = puzzlebot_msgs/ConnectionPair TYPE_*
 DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED = 0, 1, 2     # = puzzlebot_msgs/ConnectionPair STATUS_*
@@ -242,7 +244,7 @@ def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=No
     return status
 
 
-def alignment_points(pair, pose_i=None, pose_j=None, approach=None, mover="j"):
+def alignment_points(pair, pose_i=None, pose_j=None, approach=None, mover="j", aim=0.0):
     """Points the alignment cost brings together in the pair's current phase.
 
     Anchor pairs first bring the anchor head H_a to the opening C_o
@@ -261,17 +263,20 @@ def alignment_points(pair, pose_i=None, pose_j=None, approach=None, mover="j"):
 
     The carrot leads the mover along the axis (pure pursuit: a unicycle
     turns onto the line while it drives), and a misaligned pair lines up at
-    a standoff, where there is room to turn, before it closes in.
+    a standoff, where there is room to turn, before it closes in. ``aim`` [m]
+    puts the anchor that far across the opening's axis (robot j's +y): the
+    docking manoeuvre's correction after a jam (puzzlebot_mpc.docking).
     Returns ((x, y, heading) on robot_i, (x, y, heading) on robot_j).
     """
     if pair.type == ANCHOR and pair.status == DECOUPLED:
         head = np.array([pair.head[0], pair.head[1], pair.point_i[2]])
         pj = np.array(pair.point_j, dtype=float)
+        pj[1] += aim
         if approach is not None and pose_i is not None and pose_j is not None:
             lookahead, smax, k_th, k_y = approach
             dth = abs(alignment_error(pair, pose_i, pose_j)[1])
             if mover == "j":        # carrot behind the anchor head, on the anchor robot's axis
-                q = inverse_transform_point(pose_i, world_point(pose_j, pair.point_j))
+                q = inverse_transform_point(pose_i, world_point(pose_j, pj))
                 e_x, e_y = head[0] - q[0], q[1] - head[1]
             else:                   # carrot in front of the opening, on the opening robot's axis
                 q = inverse_transform_point(pose_j, world_point(pose_i, pair.head))
@@ -282,6 +287,10 @@ def alignment_points(pair, pose_i=None, pose_j=None, approach=None, mover="j"):
             else:
                 pj[0] += c
         return head, pj
+    if pair.type == ANCHOR and aim:
+        pj = np.array(pair.point_j, dtype=float)
+        pj[1] += aim
+        return pair.point_i, pj
     return pair.point_i, pair.point_j
 
 
@@ -311,6 +320,32 @@ def select_active(candidates, busy=(), order=None):
     return chosen
 
 
+class CoupledPairs(dict):
+    """The coupled pairs {key: ConnectionPair}; ``version`` counts the changes (for caches of the assemblies)."""
+
+    version = 0
+
+    def __setitem__(self, key, value):
+        self.version += 1
+        super().__setitem__(key, value)
+
+    def __delitem__(self, key):
+        self.version += 1
+        super().__delitem__(key)
+
+    def pop(self, key, *default):
+        self.version += 1
+        return super().pop(key, *default)
+
+    def clear(self):
+        self.version += 1
+        super().clear()
+
+    def update(self, *args, **kwargs):
+        self.version += 1
+        super().update(*args, **kwargs)
+
+
 @dataclass
 class PairBook:
     """Goal, active and coupled pairs of the stack (Algorithm 3's lists).
@@ -324,10 +359,38 @@ class PairBook:
     eps: float
     lost_margin: float
     seating: Seating = Seating()
-    coupled: Dict[Tuple[str, str], ConnectionPair] = field(default_factory=dict)
+    coupled: Dict[Tuple[str, str], ConnectionPair] = field(default_factory=CoupledPairs)
     goals: List[ConnectionPair] = field(default_factory=list)
     active: List[ConnectionPair] = field(default_factory=list)
     priority: Optional[Dict[Tuple[str, str], float]] = None
+    movers: Dict[Tuple[str, str], Optional[str]] = field(default_factory=dict)   # active pair -> "i" / "j" / None
+    dock_settings: Optional[DockingSettings] = None    # None: Algorithm 2 alone couples a pair (the paper)
+    docking: Dict[Tuple[str, str], Docking] = field(default_factory=dict)   # goal pair -> its manoeuvre
+    monitors: Dict[Tuple[str, str], SeatMonitor] = field(default_factory=dict)  # coupled pair -> its watch
+    repair: bool = False                 # re-seat coupled pairs found open (a couple behaviour runs)
+    max_seeds: int = 0                   # sub-assemblies that may form at once (0: no limit)
+    reseats: int = 0                     # pairs sent back to be re-seated so far
+
+    @classmethod
+    def from_settings(cls, geometry, settings):
+        """The pair book of an MPC's settings (MPCSettings: status margins, seating, docking)."""
+        return cls(geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating(),
+                   dock_settings=settings.docking_settings(), max_seeds=settings.assembly_seeds)
+
+    def assemblies(self, names):
+        """{robot: its assembly (robots in ``names`` order)} over the coupled pairs, computed once per change
+        of the coupled pairs (the behaviours ask for it for every pair, every step)."""
+        version, names = getattr(self.coupled, "version", None), tuple(names)
+        cache = getattr(self, "_assemblies", None)
+        if version is None or cache is None or cache[0] != version:
+            cache = self._assemblies = (version, {})
+        if names not in cache[1]:
+            out = {}
+            for g in components(list(names), list(self.coupled.values())):
+                for r in g:
+                    out[r] = g
+            cache[1][names] = out
+        return cache[1][names]
 
     def all_pairs(self):
         """Every known pair, each once: coupled first, then goals not yet coupled."""
@@ -340,9 +403,11 @@ class PairBook:
         self.goals = [p for p in pairs if p.key not in self.coupled]
         self.priority = priority
         self.active = []
+        self.movers, self.docking = {}, {}
 
     def clear_goals(self):
-        self.goals, self.active, self.priority = [], [], None
+        self.goals, self.active, self.priority, self.movers, self.docking = [], [], None, {}, {}
+        self.repair = False
 
     def remove_coupled(self, key):
         return self.coupled.pop(key, None)
@@ -359,73 +424,225 @@ class PairBook:
         return None
 
     def assign_active(self, poses):
-        """Choose the active pairs among the goals (robots with a pose only).
+        """Choose the active pairs among the goals (robots with a pose only): every pair that can go now.
 
-        Conflict-free (a robot is in one active pair) and *growing one
-        assembly*: a single robot docks onto an assembly of two or more (the
-        seed: the largest that has such a pair, ties broken by priority),
-        several at once where the seed has several free places. Before any
-        assembly exists, the best pair alone is chosen (it becomes the seed).
-        Two multi-robot assemblies are joined only when nothing else is left:
-        a straight chain of unicycles can only turn through its couplings'
-        freedom, so docking one chain onto another is a hard manoeuvre, while a
-        single robot docks easily.
+        Algorithm 3 executes every non-conflicting pair at once; here a pair
+        conflicts with another when they share a robot, or when an assembly
+        would have two jobs at once. In every active pair one side *moves*
+        (docks) and the other *holds* (:func:`mover_of`); an assembly moves
+        for at most one pair and, while it moves, is docked onto by none; an
+        assembly that holds may be docked onto at several free places at
+        once. Sub-assemblies therefore form in parallel (seeds of two single
+        robots), single robots join them (grow), and assemblies join each
+        other, the smaller one moving. At most ``max_seeds`` sub-assemblies
+        exist or form at once (0: no limit); a seed then starts where the
+        target's graph has its middle, so the assembly grows outwards at both
+        ends. Pairs already being aligned keep their place (switching partners
+        mid-way wastes the approach), pairs whose manoeuvre is under way (a
+        pair being re-seated) first; the rest are taken in priority order,
+        growing first, then seeding, then joining.
+        A goal pair between two robots of the same assembly (closing a loop,
+        e.g. the last knob pair of a grid) holds on both sides.
         """
         missing = {n for n, p in poses.items() if p is None}
-        order = (lambda p: self.priority.get(p.key, 0.0)) if self.priority else None
+        order = (lambda q: self.priority.get(q.key, 0.0)) if self.priority else None
         ranked = sorted(self.goals, key=order) if order else list(self.goals)
-        coupled = list(self.coupled.values())
-        group_of = {}
-        for g in components(sorted({r for p in coupled for r in p.robots}), coupled):
-            for r in g:
-                group_of[r] = tuple(g)
-        grow, single, join = [], [], []
-        for p in ranked:
-            gi, gj = group_of.get(p.robot_i), group_of.get(p.robot_j)
-            (single if gi is None and gj is None else grow if (gi is None) != (gj is None) else join).append(p)
-        if grow:
-            def seed_key(g):
-                return (len(g), -min(k for k, p in enumerate(grow) if set(p.robots) & set(g)))
-            seeds = {group_of.get(p.robot_i) or group_of.get(p.robot_j) for p in grow}
-            seed = set(max(seeds, key=seed_key))
-            eligible = [p for p in grow if set(p.robots) & seed]
-        else:
-            eligible = (single or join)[:1]
-        # Pairs already being aligned keep their place: switching partners mid-way wastes the approach.
-        keep = [p for p in self.active if p in eligible and not (set(p.robots) & missing)]
-        busy = {r for p in keep for r in p.robots} | missing
-        rest = [p for p in eligible if p not in keep]
-        self.active = keep + select_active(rest, busy)
+        group_of = self.groups()
+        kinds = {"grow": 0, "seed": 1, "join": 2, "close": 3}
+
+        def kind(q):
+            gi, gj = group_of[q.robot_i], group_of[q.robot_j]
+            if gi == gj:
+                return "close"
+            si, sj = len(gi), len(gj)
+            return "seed" if si == sj == 1 else "grow" if min(si, sj) == 1 else "join"
+
+        def underway(q):                  # its manoeuvre is past the approach (e.g. a pair being re-seated)
+            return q.key in self.docking and self.docking[q.key].phase != APPROACH
+
+        keep = [q for q in ranked if (q in self.active or underway(q)) and not set(q.robots) & missing]
+        keep.sort(key=lambda q: not underway(q))
+        eccentricity = self._seed_eccentricity() if self.max_seeds else {}
+        rest = sorted((q for q in ranked if q not in keep and not set(q.robots) & missing),
+                      key=lambda q: (kinds[kind(q)], eccentricity.get(q.key, 0)))
+        assemblies = len({g for g in group_of.values() if len(g) > 1})
+        used, moving, holding, chosen = set(), set(), set(), []
+        for q in keep + rest:
+            if q.robot_i in used or q.robot_j in used:
+                continue
+            gi, gj = group_of[q.robot_i], group_of[q.robot_j]
+            mover = mover_of(q, len(gi), len(gj)) if gi != gj else None
+            mg = None if mover is None else (gi if mover == "i" else gj)
+            hg = [g for g in {gi, gj} if g != mg]
+            if mg is not None and (mg in moving or mg in holding):
+                continue
+            if any(g in moving for g in hg):
+                continue
+            if q not in keep and kind(q) == "seed" and self.max_seeds and assemblies >= self.max_seeds:
+                continue
+            if kind(q) == "seed":
+                assemblies += 1
+            chosen.append(q)
+            if q not in self.active and q.key in self.docking:
+                self.docking[q.key].since = None     # its turn now: the phase's clock starts at the next update
+            self.movers[q.key] = mover
+            used.update(q.robots)
+            if mg is not None:
+                moving.add(mg)
+            holding.update(hg)
+        self.active = chosen
         return self.active
+
+    def _seed_eccentricity(self):
+        """{goal pair key: hops from the pair to the farthest robot of the goal graph}: a seed with a small
+        one sits in the middle of the target, and the assembly grows outwards at several places at once."""
+        edges = {}
+        for q in list(self.coupled.values()) + self.goals:
+            edges.setdefault(q.robot_i, set()).add(q.robot_j)
+            edges.setdefault(q.robot_j, set()).add(q.robot_i)
+        out = {}
+        for q in self.goals:
+            dist, frontier = {r: 0 for r in q.robots}, list(q.robots)
+            while frontier:
+                nxt = []
+                for r in frontier:
+                    for n in edges.get(r, ()):
+                        if n not in dist:
+                            dist[n] = dist[r] + 1
+                            nxt.append(n)
+                frontier = nxt
+            out[q.key] = max(dist.values())
+        return out
+
+    def groups(self):
+        """{robot: its assembly as a sorted tuple of names} over the coupled pairs (single robots: (name,)),
+        for the robots of the coupled and goal pairs."""
+        robots = sorted({r for q in self.coupled.values() for r in q.robots} | {r for q in self.goals for r in q.robots})
+        return {r: tuple(sorted(g)) for r, g in self.assemblies(robots).items()}
+
+    def mover(self, pair):
+        """"i", "j" or None (both hold: a loop closure) for an active pair (mover_of when not assigned)."""
+        if pair.key in self.movers:
+            return self.movers[pair.key]
+        group_of = self.groups()
+        return mover_of(pair, len(group_of.get(pair.robot_i, (pair.robot_i,))),
+                        len(group_of.get(pair.robot_j, (pair.robot_j,))))
 
     def update(self, poses, now=None):
         """Algorithm 2 on the active pairs, then the coupled-pair watchdog (``now`` [s]: the time).
 
-        Returns (newly coupled pairs, lost pairs).
+        With ``docking`` settings, an anchor pair that a robot docks is
+        coupled only when the docking manoeuvre has proven it seated
+        (:mod:`puzzlebot_mpc.docking`); Algorithm 2's status then only guides
+        the approach. While ``repair`` is on (a couple behaviour runs), a
+        coupled anchor pair that looks open for a while goes back to the goals
+        to be re-seated. Returns (newly coupled pairs, lost pairs).
         """
         newly, lost = [], []
         for pair in list(self.active):
             pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
             if pi is None or pj is None:
                 continue
+            dock = self._docking_of(pair, now)
+            before_status, since = pair.status, pair.since
             status = update_status(pair, pi, pj, self.geometry, self.eps, self.seating, now)
+            seated = False
+            if dock is not None and self.dock_settings.insert_by_mpc and dock.phase == APPROACH:
+                gap, lateral, dtheta = seat_measure(pair, pi, pj)
+                jammed = (before_status == HEAD_ALIGNED and status == DECOUPLED and now is not None
+                          and since is not None and now - since > self.seating.align_timeout)
+                if jammed:                       # pushed in for align_timeout without getting home
+                    dock.jammed(gap, lateral, now)
+                elif status == DECOUPLED and dock.approach_stalled(gap, lateral, dtheta, now):
+                    pass                         # backs off (a driven phase) and approaches again
+                elif status == HEAD_INSERTED and self.dock_settings.pull_test:
+                    dock.start_pull(gap, now)
+                    status = HEAD_ALIGNED
+            elif dock is not None:
+                gap, lateral, dtheta = seat_measure(pair, pi, pj)
+                before = dock.phase
+                seated = dock.update(gap, lateral, dtheta, now)
+                if seated:
+                    status = HEAD_INSERTED
+                elif dock.phase == BACKOFF or before == BACKOFF:
+                    status = DECOUPLED           # backing off, then the approach from the standoff again
+                elif dock.phase in DRIVEN or status == HEAD_INSERTED:
+                    status = HEAD_ALIGNED        # the pose alone does not prove the anchor seated
             if status != pair.status or pair.since is None:
                 pair.since = now
             pair.status = status
             if pair.status == HEAD_INSERTED:
                 self.active.remove(pair)
                 self.goals.remove(pair)
+                self.docking.pop(pair.key, None)
                 self.add_coupled(pair)
                 newly.append(pair)
+        tugged = self._tugged()
         for key, pair in list(self.coupled.items()):
             pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
             if pi is None or pj is None:
                 continue
+            if pair.robot_i in tugged:       # a neighbour pushes or pulls on this assembly: it gives a little
+                self.monitors.pop(key, None)
+                continue
             if head_margin(pair, pi, pj, coupling_polygon(pair, self.geometry)) < -self.lost_margin:
                 del self.coupled[key]
+                self.monitors.pop(key, None)
                 pair.status = DECOUPLED
                 lost.append(pair)
+            elif self.repair and self.dock_settings is not None and pair.type == ANCHOR:
+                monitor = self.monitors.setdefault(key, SeatMonitor(self.dock_settings))
+                gap, lateral, _ = seat_measure(pair, pi, pj)
+                if monitor.update(gap, lateral, now):
+                    self._reseat(pair, gap, lateral, now)
         return newly, lost
+
+    def _tugged(self):
+        """Robots of the assemblies on which a docking manoeuvre pushes or pulls right now."""
+        driven = [q for q in self.active if q.key in self.docking and self.docking[q.key].phase in DRIVEN]
+        if not driven:
+            return set()
+        group_of = self.groups()
+        return {r for q in driven for end in q.robots for r in group_of.get(end, (end,))}
+
+    def _docking_of(self, pair, now):
+        """The docking manoeuvre of an active anchor pair (made on first use), or None (knob pairs, a pair
+        closing a loop, docking off). Its mover follows the assignment until the manoeuvre drives it."""
+        if self.dock_settings is None or pair.type != ANCHOR:
+            return None
+        mover = self.movers.get(pair.key, "j")
+        dock = self.docking.get(pair.key)
+        if mover is None:
+            return None
+        if dock is None:
+            dock = self.docking[pair.key] = Docking(self.dock_settings, mover, now=now)
+        elif dock.phase == APPROACH:
+            dock.mover = mover
+        return dock
+
+    def _reseat(self, pair, gap, lateral, now):
+        """A coupled pair found open goes back to the goals, to be pushed home again."""
+        del self.coupled[pair.key]
+        self.monitors.pop(pair.key, None)
+        start = PUSH
+        groups = self.groups()
+        mover = mover_of(pair, len(groups.get(pair.robot_i, ())) or 1, len(groups.get(pair.robot_j, ())) or 1)
+        self.docking[pair.key] = Docking(self.dock_settings, mover, start=start, now=None)
+        self.docking[pair.key].note = "re-seating: %.1f mm open, %.1f mm off the axis" % (1e3 * gap, 1e3 * lateral)
+        pair.status, pair.since, pair.confirmed = HEAD_ALIGNED, now, 0
+        self.goals.append(pair)
+        self.reseats += 1
+
+
+def mover_of(pair, size_i, size_j):
+    """Which robot of a pair docks, given the sizes of the two robots' assemblies: "i" or "j".
+
+    The smaller assembly moves (a single robot docks onto an assembly). Two
+    equal assemblies: robot j's: for an anchor pair the opening robot, which
+    docks forward with its assembly following behind it like a train, where
+    the anchor robot's would have to reverse a chain.
+    """
+    return "i" if size_i < size_j else "j"
 
 
 def components(names, pairs):

@@ -11,6 +11,9 @@ from dataclasses import dataclass
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.hardware import CONTROL_PERIOD, V_MAX, W_MAX
 from puzzlebot_common.params import from_mapping, require_positive
+from puzzlebot_mpc.docking import DockingSettings
+
+_DOCK = DockingSettings()   # the docking defaults have one home: puzzlebot_mpc/docking.py
 
 
 @dataclass(frozen=True)
@@ -98,6 +101,44 @@ class MPCSettings:
     decouple_settle_speed: float = 0.01  # m/s: after the release both robots push back into their assemblies ...
     decouple_settle_time: float = 1.5    # s: ... for this long (re-seats the neighbours' anchors the wiggle bent)
     decouple_confirm_steps: int = 3  # consecutive control steps the release must be seen
+    assembly_seeds: int = 1          # sub-assemblies a couple forms at once (0: every seed that can go; pairs.PairBook)
+    # docking an anchor pair and proving it seated (puzzlebot_mpc/docking.py; dock_* = DockingSettings fields)
+    docking: bool = True             # false: Algorithm 2 alone decides that a pair is coupled (the paper)
+    dock_push_speed: float = _DOCK.push_speed     # m/s: the mover drives straight into its partner
+    dock_push_heading_gain: float = _DOCK.push_heading_gain # 1/s: ... turning to the partner's heading at this gain
+    dock_push_start_gap: float = _DOCK.push_start_gap # m: the push starts with the faces this close ...
+    dock_push_lateral: float = _DOCK.push_lateral # m: ... C_a this close to the opening's axis ...
+    dock_push_yaw: float = _DOCK.push_yaw         # rad: ... and the headings this close
+    dock_push_timeout: float = _DOCK.push_timeout # s: not home after this long: back off, approach again
+    dock_home_gap: float = _DOCK.home_gap         # m: faces this close: pushed home ...
+    dock_home_steps: int = _DOCK.home_steps       # ... on this many control steps in a row
+    dock_insert_by_mpc: bool = _DOCK.insert_by_mpc  # the MPC pushes the anchor in; a jam aims the next approach
+    dock_pull_test: bool = _DOCK.pull_test        # prove a pair pushed home seated by pulling on it
+    dock_pull_speed: float = _DOCK.pull_speed     # m/s: the pull test ...
+    dock_pull_time: float = _DOCK.pull_time       # s: ... for this long
+    dock_seat_pull_min: float = _DOCK.seat_pull_min # m: a seated pair stretches at least this much under the pull ...
+    dock_seat_pull_max: float = _DOCK.seat_pull_max # m: ... and at most this much (anchor_trials seatpull measures it)
+    dock_pull_stall: float = _DOCK.pull_stall     # m: the pull has stalled when the gap grew less in a step
+    dock_repush_gap: float = _DOCK.repush_gap     # m: ... until the faces are this close (0: none)
+    dock_repush_speed: float = _DOCK.repush_speed # m/s: the push home after the pull
+    dock_repush_timeout: float = _DOCK.repush_timeout # s: home again after the pull within this, or back off
+    dock_backoff_speed: float = _DOCK.backoff_speed # m/s
+    dock_aim_step: float = _DOCK.aim_step         # m: after a jammed push, aim the mouth this much to the side ...
+    dock_aim_max: float = _DOCK.aim_max           # m: ... up to this far off the partner's axis
+    dock_backoff_time: float = _DOCK.backoff_time # s
+    dock_stall_time: float = _DOCK.stall_time     # s: an approach no closer in this long: back off, again (0: off)
+    dock_stall_progress: float = _DOCK.stall_progress  # m: ... by this much
+    dock_repair_gap: float = _DOCK.repair_gap     # m: a coupled pair with its faces this far apart ...
+    dock_repair_time: float = _DOCK.repair_time   # s: ... for this long is re-seated (while a couple runs)
+
+    def docking_settings(self):
+        """The docking manoeuvre's settings (puzzlebot_mpc.docking.DockingSettings), None when ``docking``
+        is off."""
+        from dataclasses import fields as dc_fields
+
+        if not self.docking:
+            return None
+        return DockingSettings(**{f.name: getattr(self, "dock_" + f.name) for f in dc_fields(DockingSettings)})
 
     def seating(self):
         """The pair status tests' lining-up conditions (puzzlebot_mpc.pairs.Seating)."""
@@ -149,6 +190,8 @@ class MPCSettings:
         if self.wiggle_partner_turn > 1.0:
             raise ConfigError("%s.wiggle_partner_turn (%g) must be within [0, 1]: a fraction of the anchor "
                               "robot's wiggle turn rate" % (where, self.wiggle_partner_turn))
+        if self.docking:
+            self.docking_settings().check(where)
         if self.decouple_reseat_speed > self.hardware_v_max:
             raise ConfigError("%s.decouple_reseat_speed (%.3f m/s) exceeds hardware_v_max (%.3f m/s)"
                               % (where, self.decouple_reseat_speed, self.hardware_v_max))

@@ -9,7 +9,10 @@ one connected assembly without overlapping bodies.
 
 Generators: ``line`` = a chain of N (slot k at (-k L, 0, 0): every robot
 faces +x and its opening is behind the robot in front, whose anchor it
-receives); ``row`` = N side by side (slot k at (0, k L, 0)), knob pairs.
+receives); ``row`` = N side by side (slot k at (0, k L, 0)), knob pairs;
+``grid`` = 2 x N/2: two lines side by side (slot (r, k) at (-k L, r L, 0)),
+anchor pairs along each line and knob pairs across them (N even, >= 4; a
+bridge is the 2 x 2 grid).
 Any other shape is a list of slots in YAML (config/targets.yaml).
 
 Assignment of robots to slots (documented in docs/mpc.md):
@@ -37,7 +40,7 @@ from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_mpc.pairs import ANCHOR, KNOB, make_pair
 
-GENERATORS = ("line", "row")
+GENERATORS = ("line", "row", "grid")
 _JOIN_TOL = 1e-4      # m: two connection points closer than this meet
 _ANGLE_TOL = 1e-3     # rad
 
@@ -60,6 +63,11 @@ def generate(name, n, geometry):
         return np.array([[-k * L, 0.0, 0.0] for k in range(n)])
     if name == "row":
         return np.array([[0.0, k * L, 0.0] for k in range(n)])
+    if name == "grid":
+        if n < 4 or n % 2:
+            raise TargetError("target 'grid' is two lines side by side: it needs an even number of robots, at "
+                              "least 4, got %d" % n)
+        return np.array([[-k * L, r * L, 0.0] for r in range(2) for k in range(n // 2)])
     raise TargetError("unknown target generator %r; known: %s" % (name, ", ".join(GENERATORS)))
 
 

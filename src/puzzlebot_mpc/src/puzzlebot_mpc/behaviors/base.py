@@ -116,13 +116,12 @@ class Context:
 
     def assembly_of(self, robot):
         """The robots coupled to ``robot`` (directly or through others), itself included, in ``names`` order."""
-        return pr.assembly_of(robot, self.names, self.pairs.coupled.values())
+        return self.pairs.assemblies(self.names).get(robot, [robot])
 
     def mover(self, pair):
-        """"i" or "j": the robot of an active pair that docks (the smaller assembly; the opening robot on a tie)."""
-        size_i = len(self.assembly_of(pair.robot_i))
-        size_j = len(self.assembly_of(pair.robot_j))
-        return "i" if size_i < size_j else "j"
+        """"i", "j" or None: the robot of a pair that docks (pairs.PairBook.mover: the smaller assembly; the
+        opening robot on a tie; None for a pair inside one assembly, where both hold)."""
+        return self.pairs.mover(pair)
 
 
 class Behavior:
@@ -188,6 +187,11 @@ class Behavior:
         """Pairs outside the pair book that need a slot in the MPC (the pair being decoupled)."""
         return []
 
+    def driven_pairs(self):
+        """Keys of active pairs whose robots this behaviour drives itself this step: the MPC leaves out
+        their alignment cost (couple: the docking manoeuvre's push and pull)."""
+        return set()
+
     def display(self, request_id, state):
         """What the behaviour was asked, for displays: DisplayObjectives."""
         return DisplayObjectives(request_id, self.req.behavior, state, [], "", [])
@@ -218,6 +222,25 @@ class Behavior:
         if missing:
             raise BehaviorError("%s: no fresh, finite pose for %s; the robots stay as they are"
                                 % (self.req.behavior, ", ".join(missing)))
+
+    def rigid_velocities(self, vel, lead, v, w, members, poses):
+        """Write into ``vel`` (N, 2) the references of an assembly moving as one body with twist (v [m/s],
+        w [rad/s]) in the frame of robot ``lead``: the lead (v, w), every other member of ``members`` the
+        rigid-body speed at its own position along its heading (clipped to v_max) and w."""
+        s, index = self.settings, self.ctx.index
+        pl = poses.get(lead)
+        if pl is None:
+            return vel
+        c, sn = math.cos(pl[2]), math.sin(pl[2])
+        for m in members:
+            pm = poses.get(m)
+            if pm is None:
+                continue
+            rx, ry = pm[0] - pl[0], pm[1] - pl[1]
+            vx, vy = v * c - w * ry, v * sn + w * rx
+            vm = vx * math.cos(pm[2]) + vy * math.sin(pm[2])
+            vel[index[m]] = (max(-s.v_max, min(s.v_max, vm)), w)
+        return vel
 
     def hold(self):
         """The velocity-mask weight of a robot that holds still: sqrt(hold_scale)."""

@@ -4,15 +4,23 @@ The target is a name (config/targets.yaml, or a generator: ``line``,
 ``row``) or explicit ``slots`` (x [m], y [m], heading [rad] in the assembly
 frame), one per named robot. At the start the goal pairs follow from the
 target and the start poses (targets.assign: MST + Hungarian); every step the
-pair book picks conflict-free active pairs and updates their status
-(Algorithm 2). Succeeds when every goal pair is coupled; a goal pair lost on
-the way is a goal again. Fails after ``timeout`` s (0: none), naming the
-pairs not coupled. Status errors: per goal pair, the distance [m] between
-its connection points (NaN without poses).
+pair book picks every conflict-free pair that can go now (pairs.PairBook.
+assign_active: sub-assemblies form in parallel, single robots join them,
+assemblies join each other) and updates their status (Algorithm 2, and for
+anchor pairs the docking manoeuvre that proves them seated:
+puzzlebot_mpc.docking). In each active pair one side docks (the mover: a
+single robot, or the smaller assembly driving as one body) and the other
+holds still. Succeeds when every goal pair is coupled; a goal pair lost on
+the way, or found open afterwards, is a goal again. Fails after ``timeout``
+s (0: none), naming the pairs not coupled. Status errors: per goal pair, the
+distance [m] between its connection points (NaN without poses).
 """
+
+import math
 
 import numpy as np
 
+from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
 from puzzlebot_mpc.targets import TargetError, assign, resolve_target
@@ -66,6 +74,7 @@ class Couple(Behavior):
         super().start(now, poses, static)
         a = self.assignment
         self.ctx.pairs.set_goals(a.pairs, a.priority)
+        self.ctx.pairs.repair = True
         return "goal pairs: " + ", ".join("%s->%s" % p.key for p in a.pairs)
 
     def status(self, now, poses, newly, lost, elapsed):
@@ -96,26 +105,53 @@ class Couple(Behavior):
             elapsed, ", ".join(p.describe() for p in self.ctx.pairs.goals)), errors)
 
     def objectives(self, obj, now, poses):
-        """The single robot of an active pair docks (no rest cost); the assembly it joins holds still
-        (rest cost scaled by hold_scale), so the docking robot aligns with a target that does not move.
+        """Per active pair: the mover's assembly is free (the MPC's alignment cost brings it in, its
+        couplings keep it together), the other side holds still (rest cost scaled by hold_scale). While
+        the docking manoeuvre drives a pair (push, pull, back off), the mover gets the manoeuvre's command
+        (sent as is) and the rest of its assembly the rigid-body speeds that go with it; the pair's
+        alignment cost is off (the manager marks it inactive).
 
-        The seed pair (two single robots) lines up with both robots moving;
-        once its anchor head is in the opening (head_aligned) the robot that
-        is not the mover holds still while the mover pushes the anchor home
-        (otherwise the partner gives way and the pair drives off together,
-        into the robots around it).
+        A seed pair (two single robots) lines up with both robots moving; once its anchor head is in the
+        opening (head_aligned) the partner holds still while the mover pushes the anchor home (otherwise
+        the partner gives way and the pair drives off together, into the robots around it). A pair inside
+        one assembly (closing a loop) holds on both sides.
         """
         ctx, hold = self.ctx, self.hold()
-        for p in ctx.pairs.active:
-            sizes = [len(ctx.assembly_of(r)) for r in p.robots]
-            seed_pushing = sizes == [1, 1] and p.status == pr.HEAD_ALIGNED
-            holder = p.robot_j if ctx.mover(p) == "i" else p.robot_i
-            for r, size in zip(p.robots, sizes):
-                if size == 1:
-                    obj.velocity_mask[ctx.index[r]] = hold if seed_pushing and r == holder else 0.0
-                else:
-                    for m in ctx.assembly_of(r):
-                        obj.velocity_mask[ctx.index[m]] = hold
+        book = ctx.pairs
+        for p in book.active:
+            mover = ctx.mover(p)
+            gi, gj = ctx.assembly_of(p.robot_i), ctx.assembly_of(p.robot_j)
+            if mover is None:
+                for m in set(gi) | set(gj):
+                    obj.velocity_mask[ctx.index[m]] = hold
+                continue
+            mg, hg = (gi, gj) if mover == "i" else (gj, gi)
+            m_robot, h_robot = (p.robot_i, p.robot_j) if mover == "i" else (p.robot_j, p.robot_i)
+            dock = book.docking.get(p.key)
+            driven = dock is not None and dock.phase in dk.DRIVEN
+            seed = len(mg) == len(hg) == 1
+            for m in hg:
+                free = seed and not driven and p.status != pr.HEAD_ALIGNED
+                obj.velocity_mask[ctx.index[m]] = 0.0 if free else hold
+            if not driven:
+                for m in mg:
+                    obj.velocity_mask[ctx.index[m]] = 0.0
+                continue
+            pm, ph = poses.get(m_robot), poses.get(h_robot)
+            if pm is None or ph is None:
+                continue
+            cmd = dock.command(pm[2], ph[2])
+            s = self.settings
+            v, w = float(np.clip(cmd.v, -s.v_max, s.v_max)), float(np.clip(cmd.w, -s.w_max, s.w_max))
+            self.rigid_velocities(obj.velocity, m_robot, v, w, mg, poses)
+            for m in mg:
+                obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
+            obj.open_loop[ctx.index[m_robot]] = (cmd.v, cmd.w)
+
+    def driven_pairs(self):
+        """Keys of the active pairs the docking manoeuvre drives this step (their alignment cost is off)."""
+        book = self.ctx.pairs
+        return {k for k, d in book.docking.items() if d.phase in dk.DRIVEN}
 
     def display(self, request_id, state):
         """The target's name and its slots as placed (world frame); the MPC aligns pairs, not slot

@@ -88,19 +88,5 @@ class DriveAssembly(Behavior):
 
     def velocities(self, poses):
         """(N, 2) references: (v, w) for the lead, (rigid-body speed along the heading, w) for the others."""
-        s, index = self.settings, self.ctx.index
-        vel = np.zeros((len(self.ctx.names), 2))
-        lead = poses.get(self.lead)
-        if lead is None:
-            return vel
         v, w = self.req.velocities[0]
-        c, sn = math.cos(lead[2]), math.sin(lead[2])
-        for m in self.assembly:
-            pm = poses.get(m)
-            if pm is None:
-                continue
-            rx, ry = pm[0] - lead[0], pm[1] - lead[1]
-            vx, vy = v * c - w * ry, v * sn + w * rx
-            vm = vx * math.cos(pm[2]) + vy * math.sin(pm[2])
-            vel[index[m]] = (float(np.clip(vm, -s.v_max, s.v_max)), w)
-        return vel
+        return self.rigid_velocities(np.zeros((len(self.ctx.names), 2)), self.lead, v, w, self.assembly, poses)

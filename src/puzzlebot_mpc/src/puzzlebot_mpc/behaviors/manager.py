@@ -38,8 +38,7 @@ class BehaviorManager:
         self.index = {name: i for i, name in enumerate(self.names)}
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
-        self.pairs = pairbook or pr.PairBook(self.geometry, settings.pair_epsilon, settings.pair_lost_margin,
-                                             settings.seating())
+        self.pairs = pairbook or pr.PairBook.from_settings(self.geometry, settings)
         self.targets = dict(targets or {})
         self.kinds = dict(REGISTRY if behaviors is None else behaviors)
         self._ctx = Context(self.names, self.index, settings, self.geometry, self.pairs, self.targets)
@@ -169,12 +168,16 @@ class BehaviorManager:
         if self._state == RUNNING:
             self._behavior.objectives(obj, now, poses)
         active = {p.key for p in self.pairs.active}
+        if self._state == RUNNING:
+            active -= self._behavior.driven_pairs()
         for p in self.pair_slots():
             coupled = p.key in self.pairs.coupled
             pi, pj = pr.alignment_points(p, poses.get(p.robot_i) if poses else None,
                                          poses.get(p.robot_j) if poses else None,
                                          (s.approach_lookahead, s.approach_standoff_max, s.approach_gain_angle,
-                                          s.approach_gain_lateral), mover=self._ctx.mover(p))
+                                          s.approach_gain_lateral),
+                                         mover="j" if coupled else self._ctx.mover(p) or "j",
+                                         aim=self.pairs.docking[p.key].aim if p.key in self.pairs.docking else 0.0)
             obj.pairs.append(PairObjective(self.index[p.robot_i], self.index[p.robot_j], pi, pj,
                                            active=p.key in active and not coupled, coupled=coupled,
                                            head=p.head, polygon=pr.coupling_polygon(p, self.geometry),
