@@ -20,3 +20,22 @@ function(puzzlebot_install_python)
     ")
   endforeach()
 endfunction()
+
+# puzzlebot_add_rostests([PROGRAMS file...] TESTS file.test...)
+#   With CATKIN_ENABLE_TESTING: the rostests' scripts installed as the nodes are (puzzlebot_install_python
+#   to the package's bin destination, where rostest finds them, with the workspace's interpreter) and each
+#   .test file registered (add_rostest). Without it, nothing. A macro, so that find_package(rostest)
+#   defines add_rostest and its variables in the calling package's scope.
+macro(puzzlebot_add_rostests)
+  cmake_parse_arguments(_puzzlebot_rostests "" "" "PROGRAMS;TESTS" ${ARGN})
+  if(CATKIN_ENABLE_TESTING)
+    find_package(rostest REQUIRED)
+    if(_puzzlebot_rostests_PROGRAMS)
+      puzzlebot_install_python(PROGRAMS ${_puzzlebot_rostests_PROGRAMS}
+                               DESTINATION ${CATKIN_PACKAGE_BIN_DESTINATION})
+    endif()
+    foreach(_puzzlebot_rostest ${_puzzlebot_rostests_TESTS})
+      add_rostest(${_puzzlebot_rostest})
+    endforeach()
+  endif()
+endmacro()

@@ -5,22 +5,9 @@ import pytest
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import (RobotGeometry, compose, inverse_transform_point, point_in_convex_polygon,
-                                       polygon_halfplanes, quaternion_from_yaw, signed_margin, transform_point,
-                                       wrap_angle, yaw_from_quaternion)
+                                       point_in_polygon, polygon_halfplanes, quaternion_from_yaw, signed_margin,
+                                       transform_point, wrap_angle, yaw_from_quaternion)
 from puzzlebot_common.kinematics import body_velocity, wheel_speeds
-
-
-def ray_casting_inside(poly, p):
-    """Reference point-in-polygon test (crossing number), independent of the linear form."""
-    inside = False
-    n = len(poly)
-    for i in range(n):
-        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
-        if (y1 > p[1]) != (y2 > p[1]):
-            x_cross = x1 + (p[1] - y1) * (x2 - x1) / (y2 - y1)
-            if p[0] < x_cross:
-                inside = not inside
-    return inside
 
 
 def random_convex_polygon(rng):
@@ -41,9 +28,20 @@ def test_linear_pip_agrees_with_ray_casting_on_random_points():
             linear = bool(np.all(g @ p <= h))
             if abs(signed_margin(poly, p)) < 1e-9:
                 continue  # on an edge: either answer is right
-            assert linear == ray_casting_inside(poly, p)
+            assert linear == point_in_polygon(poly, p)
             checked += 1
     assert checked > 9000
+
+
+def test_crossing_number_on_a_concave_polygon_either_way_round():
+    """The reference itself: an L (concave, where a convex test fails) and its reverse."""
+    ell = [(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (1.0, 1.0), (1.0, 2.0), (0.0, 2.0)]
+    for poly in (ell, ell[::-1]):
+        assert point_in_polygon(poly, (0.5, 0.5)) and point_in_polygon(poly, (0.5, 1.5))
+        assert point_in_polygon(poly, (1.5, 0.5))
+        assert not point_in_polygon(poly, (1.5, 1.5))           # the notch
+        assert not point_in_polygon(poly, (-0.5, 0.5)) and not point_in_polygon(poly, (2.5, 0.5))
+        assert not point_in_polygon(poly, (0.5, 2.5))
 
 
 def test_front_triangle_contains_points_ahead_of_centre_only():

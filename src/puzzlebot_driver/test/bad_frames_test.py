@@ -32,12 +32,12 @@ import rosgraph
 import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import TransformStamped, Twist
-from rosgraph_msgs.msg import Log
+from geometry_msgs.msg import Twist
 
 from puzzlebot_common import names
-from puzzlebot_common.mocap_faults import FAULTS, clean
+from puzzlebot_common.mocap_faults import FAULTS, SILENCE
 from puzzlebot_common.node_utils import robot_list_from_param
+from puzzlebot_common.rostest_lab import Mocap, NodeLog
 from puzzlebot_driver.emulator import EmulatedFleet, start_poses
 from puzzlebot_driver.params import emulator_config
 from puzzlebot_msgs.msg import WheelPwm
@@ -51,17 +51,6 @@ LONG = 0.5                 # s of garbage / silence for the stop-and-resume case
 BOUND = 0.6                # s, generous wall-time bound of the 0.3 s rules
 
 
-def frame_msg(name, f):
-    msg = TransformStamped()
-    msg.header.stamp = rospy.Time.from_sec(f.stamp)
-    msg.header.frame_id = names.WORLD_FRAME
-    msg.child_frame_id = name
-    t, r = msg.transform.translation, msg.transform.rotation
-    t.x, t.y, t.z = f.x, f.y, f.z
-    r.x, r.y, r.z, r.w = f.q
-    return msg
-
-
 class Lab:
     """TCP peers + Vicon + cmd_vel around the driver node; records what the robots receive."""
 
@@ -71,21 +60,17 @@ class Lab:
         self.fleet = EmulatedFleet(robots, cfg, start_poses(robots, None, 0.15), clock=time.time)
         self.received = {r.name: [] for r in robots}         # (t, left, right) at the robot
         self.wheel = {r.name: [] for r in robots}            # (stamp, reason) from /<robot>/wheel_pwm
-        self.logs = []                                       # (stamp, text) of the driver's /rosout lines
+        self.log = NodeLog("driver")
         self.diag = {}
-        self.faults = {}                                     # robot -> [(t0, t1, fault or None = silence)]
-        self.good = {r.name: [] for r in robots}             # stamps of the clean frames published
         for name, client in self.fleet.clients.items():
             client.on_pwm = self._on_pwm(name)
-        self.pose_pubs = {r.name: rospy.Publisher(r.vicon_topic, TransformStamped, queue_size=20) for r in robots}
         self.cmd_pubs = {r.name: rospy.Publisher(names.cmd_vel_topic(r.name), Twist, queue_size=1) for r in robots}
         for r in robots:
             rospy.Subscriber(names.wheel_pwm_topic(r.name), WheelPwm, self._on_wheel, callback_args=r.name,
                              queue_size=100)
-        rospy.Subscriber("/rosout", Log, self._on_log, queue_size=1000)
         rospy.Subscriber(names.DIAGNOSTICS_TOPIC, DiagnosticArray, self._on_diag, queue_size=10)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.mocap = Mocap(robots, self._step, POSE_RATE)     # its plan: the faults; .good: clean frames' stamps
+        self.ticks = 0
 
     def _on_pwm(self, name):
         robot = self.fleet.robots[name]
@@ -100,40 +85,23 @@ class Lab:
         with self.lock:
             self.wheel[name].append((msg.header.stamp.to_sec(), msg.reason))
 
-    def _on_log(self, msg):
-        if msg.name.endswith("driver"):
-            with self.lock:
-                self.logs.append((msg.header.stamp.to_sec(), msg.msg))
-
     def _on_diag(self, msg):
         with self.lock:
             for s in msg.status:
                 self.diag[s.name] = {kv.key: kv.value for kv in s.values}
 
-    def _run(self):
-        k, t_next = 0, time.monotonic()
-        while not self.stop.is_set():
-            t = time.time()
-            with self.lock:
-                self.fleet.advance(t, 1.0 / POSE_RATE)
-                measured = self.fleet.mocap(t)
-            for name, pose in measured:
-                fault = next((f for t0, t1, f in self.faults.get(name, ()) if t0 <= t < t1), False)
-                if fault is None:                                  # silence
-                    continue
-                if fault:
-                    self.pose_pubs[name].publish(frame_msg(name, FAULTS[fault][0](t, *pose)))
-                else:
-                    self.pose_pubs[name].publish(frame_msg(name, clean(t, *pose)))
-                    self.good[name].append(t)
-            if k % 10 == 0:
-                for pub in self.cmd_pubs.values():
-                    tw = Twist()
-                    tw.linear.x, tw.angular.z = CMD
-                    pub.publish(tw)
-            k += 1
-            t_next += 1.0 / POSE_RATE
-            time.sleep(max(0.0, t_next - time.monotonic()))
+    def _step(self, t, dt):
+        """The Mocap's plant: the emulated robots advanced, their measured poses; cmd_vel at a tenth of the rate."""
+        with self.lock:
+            self.fleet.advance(t, dt)
+            measured = self.fleet.mocap(t)
+        if self.ticks % 10 == 0:
+            for pub in self.cmd_pubs.values():
+                tw = Twist()
+                tw.linear.x, tw.angular.z = CMD
+                pub.publish(tw)
+        self.ticks += 1
+        return measured
 
     def lines(self, name, t0, t1=math.inf):
         with self.lock:
@@ -156,12 +124,11 @@ class DriverBadFrames(unittest.TestCase):
             time.sleep(0.1)
         lab = Lab(robots, rospy.get_param("/driver/bound_port"))
         lab.fleet.start()
-        lab.thread.start()
+        lab.mocap.start()
         try:
             self.run_cases(lab)
         finally:
-            lab.stop.set()
-            lab.thread.join(timeout=2.0)
+            lab.mocap.stop()
             lab.fleet.stop()
 
     def run_cases(self, lab):
@@ -172,17 +139,12 @@ class DriverBadFrames(unittest.TestCase):
         now = time.time()
         steady = {n: peak(lab.lines(n, now - 1.0, now)) for n in lab.received}
         self.assertTrue(all(40 < s < 100 for s in steady.values()), steady)     # ~57 + 9 for (0.04, 0.3)
-        cases = [(fault, burst) for fault in sorted(FAULTS) for burst in (1, 10)]
-        schedule = []                                                           # (robot, fault, burst, t0)
+        plan = lab.mocap.plan
         t0 = time.time() + 0.2
-        for i, (fault, burst) in enumerate(cases):
-            name, t = VICTIMS[i % len(VICTIMS)], t0 + SPACING * (i // len(VICTIMS))
-            t = math.floor(t * POSE_RATE) / POSE_RATE + 0.5 / POSE_RATE           # between two frames
-            schedule.append((name, fault, burst, t))
-            lab.faults.setdefault(name, []).append((t, t + burst / POSE_RATE, fault))
+        schedule = plan.every_fault(VICTIMS, t0, SPACING, POSE_RATE)            # (robot, fault, burst, t)
         t_long = schedule[-1][3] + SPACING + 0.2
-        lab.faults.setdefault("p21", []).append((t_long, t_long + LONG, "translation.x = nan"))
-        lab.faults.setdefault("p22", []).append((t_long, t_long + LONG, None))
+        plan.add("p21", t_long, t_long + LONG, "translation.x = nan")
+        plan.add("p22", t_long, t_long + LONG, SILENCE)
         while time.time() < t_long + LONG + 1.0:
             time.sleep(0.1)
         time.sleep(1.2)                                                         # a diagnostics message
@@ -192,9 +154,7 @@ class DriverBadFrames(unittest.TestCase):
             window = lab.lines(name, t, t + SPACING)
             self.assertGreater(len(window), 10, (name, fault, burst))
             self.assertLessEqual(peak(window), 2 * steady[name], (name, fault, burst, peak(window)))
-            with lab.lock:
-                named = [text for stamp, text in lab.logs if t - 0.05 <= stamp < t + SPACING + 0.5
-                         and "rejected pose (%s): %s:" % (kind, name) in text]
+            named = lab.log.rejections(name, kind, t - 0.05, t + SPACING + 0.5)
             self.assertTrue(named, "no log line for %s on %s at %.2f" % (fault, name, t))
             reasons = lab.reasons(name, t, t + SPACING)
             self.assertTrue(reasons and all(r == "drive" for r in reasons), (name, fault, burst, set(reasons)))
@@ -207,9 +167,9 @@ class DriverBadFrames(unittest.TestCase):
         self.assertIn("/driver", [n for _, nodes in rosgraph.Master("/t").getSystemState()[0] for n in nodes])
 
         for name, what in (("p21", "garbage"), ("p22", "silence")):
-            with lab.lock:
-                last_good = max(t for t in lab.good[name] if t < t_long)
-                first_good = min(t for t in lab.good[name] if t >= t_long + LONG)
+            good = list(lab.mocap.good[name])
+            last_good = max(t for t in good if t < t_long)
+            first_good = min(t for t in good if t >= t_long + LONG)
             zero = [t for t, l, r in lab.lines(name, t_long) if (l, r) == (0, 0)]
             self.assertTrue(zero, "%s: %s never stopped it" % (name, what))
             stop = zero[0] - last_good

@@ -15,7 +15,6 @@ as one frame and as a burst of 10, replaces the frames of one of pz1..pz4
 - a line on /rosout from the node names each rejection (robot and kind).
 """
 
-import math
 import statistics
 import threading
 import time
@@ -24,13 +23,12 @@ import unittest
 import rosgraph
 import rospy
 import rostest
-from geometry_msgs.msg import TransformStamped, Twist
-from rosgraph_msgs.msg import Log
+from geometry_msgs.msg import Twist
 
 from puzzlebot_common import names
-from puzzlebot_common.mocap_faults import FAULTS, clean
-from puzzlebot_common.model import unicycle_arc
+from puzzlebot_common.mocap_faults import FAULTS
 from puzzlebot_common.node_utils import robot_list_from_param
+from puzzlebot_common.rostest_lab import Mocap, NodeLog, UnicyclePlant
 from puzzlebot_msgs.msg import SolverStats
 from puzzlebot_msgs.srv import SetBehavior, SetBehaviorRequest
 
@@ -42,80 +40,35 @@ CLEAN = "pz5"
 BOUND = 0.6              # s, generous wall-time bound of the ~0.25 s rule
 
 
-def frame_msg(name, f):
-    msg = TransformStamped()
-    msg.header.stamp = rospy.Time.from_sec(f.stamp)
-    msg.header.frame_id = names.WORLD_FRAME
-    msg.child_frame_id = name
-    t, r = msg.transform.translation, msg.transform.rotation
-    t.x, t.y, t.z = f.x, f.y, f.z
-    r.x, r.y, r.z, r.w = f.q
-    return msg
-
-
-class Plant:
-    """Unicycles driven by cmd_vel, published as Vicon poses (with faults)."""
+class Lab:
+    """Unicycles driven by the node's cmd_vel (plant), published as Vicon poses with faults (mocap); the
+    node's log lines and solver stats."""
 
     def __init__(self, robots):
+        self.plant = UnicyclePlant({r.name: (0.0, 0.15 * i, 0.0) for i, r in enumerate(robots)})
+        self.mocap = Mocap(robots, self.plant.step, POSE_RATE)
+        self.log = NodeLog("mpc")
         self.lock = threading.Lock()
-        self.poses = {r.name: (0.0, 0.15 * i, 0.0) for i, r in enumerate(robots)}
-        self.cmd = {r.name: (0.0, 0.0) for r in robots}
-        self.cmds = {r.name: [] for r in robots}              # (arrival, v, w)
-        self.logs, self.stats = [], []
-        self.faults = {}                                      # robot -> [(t0, t1, fault)]
-        self.pubs = {r.name: rospy.Publisher(r.vicon_topic, TransformStamped, queue_size=20) for r in robots}
-        for r in robots:
-            rospy.Subscriber(names.cmd_vel_topic(r.name), Twist, self._on_cmd, callback_args=r.name, queue_size=10)
-        rospy.Subscriber("/rosout", Log, self._on_log, queue_size=1000)
+        self.stats = []                                       # (arrival, success)
         rospy.Subscriber(names.SOLVER_STATS_TOPIC, SolverStats, self._on_stats, queue_size=100)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-
-    def _on_cmd(self, msg, name):
-        with self.lock:
-            self.cmd[name] = (msg.linear.x, msg.angular.z)
-            self.cmds[name].append((time.time(), msg.linear.x, msg.angular.z))
-
-    def _on_log(self, msg):
-        if msg.name.endswith("mpc"):
-            with self.lock:
-                self.logs.append((msg.header.stamp.to_sec(), msg.msg))
 
     def _on_stats(self, msg):
         with self.lock:
             self.stats.append((time.time(), msg.success))
 
-    def _run(self):
-        t_next = time.monotonic()
-        while not self.stop.is_set():
-            t = time.time()
-            with self.lock:
-                for n, (v, w) in self.cmd.items():
-                    self.poses[n] = unicycle_arc(self.poses[n], v, w, 1.0 / POSE_RATE)
-                poses = dict(self.poses)
-            for n, p in poses.items():
-                fault = next((f for t0, t1, f in self.faults.get(n, ()) if t0 <= t < t1), None)
-                self.pubs[n].publish(frame_msg(n, FAULTS[fault][0](t, *p) if fault else clean(t, *p)))
-            t_next += 1.0 / POSE_RATE
-            time.sleep(max(0.0, t_next - time.monotonic()))
-
-    def commands(self, name, t0, t1=math.inf):
-        with self.lock:
-            return [c for c in self.cmds[name] if t0 <= c[0] < t1]
-
 
 class MpcBadFrames(unittest.TestCase):
     def test_bad_frames_hold_the_robot_and_never_stop_the_others(self):
         robots = robot_list_from_param()
-        plant = Plant(robots)
-        plant.thread.start()
+        lab = Lab(robots)
+        lab.mocap.start()
         try:
-            self.run_cases(plant, [r.name for r in robots])
+            self.run_cases(lab, [r.name for r in robots])
         finally:
-            plant.stop.set()
-            plant.thread.join(timeout=2.0)
+            lab.mocap.stop()
 
-    def run_cases(self, plant, robot_names):
+    def run_cases(self, lab, robot_names):
+        plant = lab.plant
         rospy.wait_for_service(names.SET_BEHAVIOR_SERVICE, timeout=60.0)
         call = rospy.ServiceProxy(names.SET_BEHAVIOR_SERVICE, SetBehavior)
         tw = Twist()
@@ -128,14 +81,8 @@ class MpcBadFrames(unittest.TestCase):
                 and time.monotonic() < end:
             time.sleep(0.1)
         time.sleep(1.0)
-        cases = [(fault, burst) for fault in sorted(FAULTS) for burst in (1, 10)]
-        schedule = []
         t0 = time.time() + 0.2
-        for i, (fault, burst) in enumerate(cases):
-            name, t = VICTIMS[i % len(VICTIMS)], t0 + SPACING * (i // len(VICTIMS))
-            t = math.floor(t * POSE_RATE) / POSE_RATE + 0.5 / POSE_RATE
-            schedule.append((name, fault, burst, t))
-            plant.faults.setdefault(name, []).append((t, t + burst / POSE_RATE, fault))
+        schedule = lab.mocap.plan.every_fault(VICTIMS, t0, SPACING, POSE_RATE)   # (robot, fault, burst, t)
         t_end = schedule[-1][3] + SPACING + 0.5
         while time.time() < t_end:
             time.sleep(0.1)
@@ -151,15 +98,13 @@ class MpcBadFrames(unittest.TestCase):
             self.assertTrue(back, (name, fault, burst))
             resume.append(back[0] - t_good)
             self.assertLess(back[0] - t_good, BOUND, (name, fault, burst))
-            with plant.lock:
-                named = [text for stamp, text in plant.logs if t - 0.05 <= stamp < t + SPACING + 0.5
-                         and "rejected pose (%s): %s:" % (kind, name) in text]
+            named = lab.log.rejections(name, kind, t - 0.05, t + SPACING + 0.5)
             self.assertTrue(named, "no log line for %s on %s at %.2f" % (fault, name, t))
         clean_cmds = plant.commands(CLEAN, t0, t_end)
         self.assertGreater(len(clean_cmds), 10 * (t_end - t0) * 0.5)
         self.assertTrue(all(v > 0.02 for _, v, _ in clean_cmds))
-        with plant.lock:
-            stats = [s for t, s in plant.stats if t0 <= t < t_end]
+        with lab.lock:
+            stats = [s for t, s in lab.stats if t0 <= t < t_end]
         self.assertTrue(stats and all(stats), "failed or missing MPC steps: %d of %d" % (stats.count(False), len(stats)))
         self.assertIn("/mpc", [n for _, nodes in rosgraph.Master("/t").getSystemState()[0] for n in nodes])
         print("%d cases; command back %.3f s (median) / %.3f s (max) after the first good frame; %d MPC steps, "

@@ -1,7 +1,6 @@
 #!/usr/bin/env python3
 """Bad input to the MPC node: clear errors, no crash, no uncommanded motion."""
 
-import math
 import subprocess
 import time
 import unittest
@@ -9,17 +8,10 @@ import unittest
 import rospy
 import rostest
 from geometry_msgs.msg import Point, TransformStamped, Twist
+
+from puzzlebot_common.rostest_lab import assert_config_error, pose_msg
 from puzzlebot_msgs.msg import SolverStats
 from puzzlebot_msgs.srv import SetBehavior, SetBehaviorRequest
-
-
-def pose_msg(x, y, yaw):
-    msg = TransformStamped()
-    msg.header.stamp = rospy.Time.now()
-    msg.header.frame_id = "world"
-    msg.transform.translation.x, msg.transform.translation.y = x, y
-    msg.transform.rotation.z, msg.transform.rotation.w = math.sin(yaw / 2), math.cos(yaw / 2)
-    return msg
 
 
 class MpcBadInput(unittest.TestCase):
@@ -37,7 +29,7 @@ class MpcBadInput(unittest.TestCase):
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             for n, p in poses.items():
-                self.pubs[n].publish(pose_msg(*p))
+                self.pubs[n].publish(pose_msg(n, *p))
             time.sleep(0.02)
 
     def test_unknown_robot_nan_pose_and_stale_pose(self):
@@ -75,9 +67,7 @@ class MpcBadInput(unittest.TestCase):
                                   capture_output=True, text=True, timeout=60)
         finally:
             rospy.set_param("/puzzlebot/robots", good)
-        self.assertEqual(proc.returncode, 2, proc.stderr)
-        self.assertIn("/puzzlebot/robots[1]: missing 'name'", proc.stderr)
-        self.assertNotIn("Traceback", proc.stderr)
+        assert_config_error(self, proc, "/puzzlebot/robots[1]: missing 'name'")
 
 
 if __name__ == "__main__":

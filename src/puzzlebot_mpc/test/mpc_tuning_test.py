@@ -21,10 +21,11 @@ import unittest
 import rospy
 import rostest
 from dynamic_reconfigure.client import Client
-from geometry_msgs.msg import Point, TransformStamped, Twist
+from geometry_msgs.msg import Point
 
 from puzzlebot_common import names
-from puzzlebot_common.model import unicycle_arc
+from puzzlebot_common.node_utils import robot_list_from_param
+from puzzlebot_common.rostest_lab import Mocap, UnicyclePlant
 from puzzlebot_msgs.msg import SolverStats
 from puzzlebot_msgs.srv import SetBehavior, SetBehaviorRequest
 
@@ -32,57 +33,37 @@ POSE_RATE = 100.0
 DT = 0.1                 # s, the MPC's period (mpc.yaml)
 
 
-class Plant:
-    """One unicycle driven by cmd_vel, published as Vicon poses; the node's commands and costs, logged."""
+class Lab:
+    """One unicycle driven by cmd_vel (plant), published as Vicon poses (mocap); the node's costs, logged."""
 
     def __init__(self):
+        self.plant = UnicyclePlant({"pz1": (0.0, 0.0, 0.0)})
+        self.mocap = Mocap(robot_list_from_param(), self.plant.step, POSE_RATE).start()
         self.lock = threading.Lock()
-        self.pose, self.cmd = (0.0, 0.0, 0.0), (0.0, 0.0)
-        self.cmds, self.costs = [], []                         # (wall time, v) / (wall time, cost)
-        self.pub = rospy.Publisher(names.vicon_topic("pz1"), TransformStamped, queue_size=20)
-        rospy.Subscriber(names.cmd_vel_topic("pz1"), Twist, self._on_cmd, queue_size=10)
+        self.costs = []                                        # (wall time, cost)
         rospy.Subscriber(names.SOLVER_STATS_TOPIC, SolverStats, self._on_stats, queue_size=100)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
-
-    def _on_cmd(self, msg):
-        with self.lock:
-            self.cmd = (msg.linear.x, msg.angular.z)
-            self.cmds.append((time.monotonic(), msg.linear.x))
 
     def _on_stats(self, msg):
         with self.lock:
-            self.costs.append((time.monotonic(), msg.cost))
+            self.costs.append((time.time(), msg.cost))
 
-    def _run(self):
-        t_next = time.monotonic()
-        while not self.stop.is_set():
-            with self.lock:
-                self.pose = unicycle_arc(self.pose, *self.cmd, 1.0 / POSE_RATE)
-                x, y, _ = self.pose
-            msg = TransformStamped()
-            msg.header.stamp = rospy.Time.now()
-            msg.header.frame_id, msg.child_frame_id = names.WORLD_FRAME, "vicon/pz1/pz1"
-            msg.transform.translation.x, msg.transform.translation.y = x, y
-            msg.transform.rotation.w = 1.0
-            self.pub.publish(msg)
-            t_next += 1.0 / POSE_RATE
-            time.sleep(max(0.0, t_next - time.monotonic()))
+    def speeds(self, t0):
+        """v [m/s] of the commands that arrived since wall time ``t0``."""
+        return [v for _, v, _ in self.plant.commands("pz1", t0)]
 
-    def since(self, log, t0):
+    def costs_since(self, t0):
         with self.lock:
-            return [v for t, v in log if t >= t0]
+            return [c for t, c in self.costs if t >= t0]
 
 
 class MpcTuning(unittest.TestCase):
     def setUp(self):
-        self.plant = Plant()
+        self.lab = Lab()
         rospy.wait_for_service(names.SET_BEHAVIOR_SERVICE, timeout=60.0)
         self.tuning = Client("/mpc/tuning", timeout=30.0)
 
     def tearDown(self):
-        self.plant.stop.set()
+        self.lab.mocap.stop()
 
     def wait(self, seconds):
         time.sleep(seconds)
@@ -94,7 +75,7 @@ class MpcTuning(unittest.TestCase):
         self.wait(1.0)
         start = self.tuning.get_configuration(timeout=10.0)
         self.assertEqual((start["v_max"], start["w_goal_terminal"]), (0.05, 10000.0))   # mpc.yaml
-        self.assertAlmostEqual(max(self.plant.since(self.plant.cmds, time.monotonic() - 0.5)), 0.05, places=3)
+        self.assertAlmostEqual(max(self.lab.speeds(time.time() - 0.5)), 0.05, places=3)
 
         for change, reason in (({"v_max": 0.5}, "exceed the hardware limits"),
                                ({"w_goal_terminal": -1.0}, "w_goal_terminal: must be >= 0")):
@@ -102,31 +83,31 @@ class MpcTuning(unittest.TestCase):
             print("tuning %s: refused: %s" % (change, answer["refused"]), flush=True)
             self.assertIn(reason, answer["refused"])
             self.assertEqual((answer["v_max"], answer["w_goal_terminal"]), (0.05, 10000.0))
-        t0 = time.monotonic()
+        t0 = time.time()
         self.wait(0.5)
-        self.assertAlmostEqual(max(self.plant.since(self.plant.cmds, t0)), 0.05, places=3)  # unchanged
+        self.assertAlmostEqual(max(self.lab.speeds(t0)), 0.05, places=3)  # unchanged
 
-        before = time.monotonic()
+        before = time.time()
         answer = self.tuning.update_configuration({"v_max": 0.02})
-        t_answer = time.monotonic()
+        t_answer = time.time()
         self.assertEqual((answer["refused"], answer["v_max"]), ("", 0.02))
         self.wait(1.0)
-        after = self.plant.since(self.plant.cmds, t_answer + 2 * DT)
+        after = self.lab.speeds(t_answer + 2 * DT)
         print("tuning v_max 0.05 -> 0.02: answered after %.0f ms; %d commands from 2 steps on, the largest "
               "%.4f m/s" % (1e3 * (t_answer - before), len(after), max(after)), flush=True)
         self.assertTrue(after and max(after) <= 0.02 + 1e-6, "commands above the new v_max: %s" % after[:5])
         self.assertAlmostEqual(rospy.get_param("/mpc/tuning/v_max"), 0.02)
 
-        t0 = time.monotonic()
+        t0 = time.time()
         self.wait(0.5)
-        cost_before = statistics.median(self.plant.since(self.plant.costs, t0))
+        cost_before = statistics.median(self.lab.costs_since(t0))
         answer = self.tuning.update_configuration({"w_goal_terminal": 20000.0})
-        t_answer = time.monotonic()
+        t_answer = time.time()
         self.assertEqual(answer["refused"], "")
         self.wait(0.2 + 2 * DT)
-        t1 = time.monotonic()
+        t1 = time.time()
         self.wait(0.5)
-        cost_after = statistics.median(self.plant.since(self.plant.costs, t1))
+        cost_after = statistics.median(self.lab.costs_since(t1))
         print("tuning w_goal_terminal 1e4 -> 2e4: solver cost (median of 0.5 s) %.1f -> %.1f (x%.2f)"
               % (cost_before, cost_after, cost_after / cost_before), flush=True)
         self.assertGreater(cost_after / cost_before, 1.6)

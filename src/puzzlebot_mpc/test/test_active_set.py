@@ -11,11 +11,9 @@ from puzzlebot_common.model import unicycle_arc
 from puzzlebot_mpc.active_set import AT_LOWER, AT_UPPER, ActiveSetQP
 from puzzlebot_mpc import controller
 from puzzlebot_mpc.controller import MultiRobotMPC
-from puzzlebot_mpc.ocp import Structure
-from puzzlebot_mpc.qp import pack
 from puzzlebot_mpc.settings import MPCSettings
 
-from test_qp import CASES, chain_scene, random_case
+from test_qp import CASES, case_problem, chain_scene, random_step_data
 
 clarabel = pytest.importorskip("clarabel")
 
@@ -131,17 +129,13 @@ def test_mpc_qps_match_clarabel(case):
     with Clarabel's optimal cost (to its tolerance) and a feasible point; from every slack at zero, when
     it is solved, the same. (Random masks leave some robots without any cost on their command: the
     optimum is not unique there, an interior point returns the middle of the optimal set.)"""
-    over, n, pairs = CASES[case]
-    s = replace(MPCSettings(horizon=4, constraint_horizon=2), **over)
-    st = Structure(n, s.horizon, s.constraint_horizon, tuple((p.i, p.j) for p in pairs))
+    s, st = case_problem(case)
     wrapper = controller._ActiveSetQP(s, st)
     qs, solver = wrapper.qs, wrapper.solver
     solver.max_iter = 200
     rng = np.random.default_rng(case)
     for _ in range(3):
-        x0, obj = random_case(rng, n, pairs, s)
-        d = pack(s, x0, obj, pairs)
-        d.bsign = rng.choice([-1.0, 1.0], size=d.bsign.shape)
+        d = random_step_data(rng, case, s)
         zbar = rng.normal(size=qs.lay.nz) * 0.05
         Px, q, Ax, b = qs.assemble(zbar, d)
         Ag, bg, lb, ub = qs.bounded(Ax, b)

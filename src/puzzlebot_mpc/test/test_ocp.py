@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from puzzlebot_common.geometry import RobotGeometry, transform_point, inverse_transform_point
+from puzzlebot_common.geometry import RobotGeometry, inverse_transform_point, point_in_polygon, transform_point
 from puzzlebot_mpc.controller import MultiRobotMPC, Objectives, PairObjective
 from puzzlebot_common.model import NX, euler_step, unicycle_arc
 from puzzlebot_mpc.ocp import Problem, Structure, pair_residual_terms, param_vector
@@ -14,18 +14,6 @@ from puzzlebot_mpc.qp import pack
 from puzzlebot_mpc.settings import MPCSettings
 
 GEO = RobotGeometry()
-
-
-def ray_casting_inside(poly, p):
-    """Reference point-in-polygon test (crossing number), independent of the linear form."""
-    inside = False
-    n = len(poly)
-    for i in range(n):
-        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
-        if (y1 > p[1]) != (y2 > p[1]):
-            if p[0] < x1 + (p[1] - y1) * (x2 - x1) / (y2 - y1):
-                inside = not inside
-    return inside
 
 
 def coupled_pair_objective():
@@ -58,7 +46,7 @@ def test_pip_rows_of_the_problem_agree_with_ray_casting_on_random_poses():
         ineq = np.asarray(ineq).ravel()
         pip = ineq[-6:-2]                          # the 4 polygon rows of the pair at k = 1
         head = inverse_transform_point(pose_j, transform_point(pose_i, GEO.anchor_head()))
-        ref = ray_casting_inside(tri, head)
+        ref = point_in_polygon(tri, head)
         inside_count += ref
         agree += (pip.max() <= 0) == ref
     assert agree == 400

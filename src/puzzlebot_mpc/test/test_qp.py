@@ -69,19 +69,31 @@ CASES = [
 ]
 
 
+def case_problem(case):
+    """Settings (horizon 4, constraint horizon 2 unless the case overrides them) and Structure of CASES[case]."""
+    over, n, pairs = CASES[case]
+    s = replace(MPCSettings(horizon=4, constraint_horizon=2), **over)
+    return s, Structure(n, s.horizon, s.constraint_horizon, tuple((p.i, p.j) for p in pairs))
+
+
+def random_step_data(rng, case, settings):
+    """A random problem of CASES[case] (random_case) packed as step data, a random butterfly cone per stage."""
+    _, n, pairs = CASES[case]
+    x0, obj = random_case(rng, n, pairs, settings)
+    d = pack(settings, x0, obj, pairs)
+    d.bsign = rng.choice([-1.0, 1.0], size=d.bsign.shape)
+    return d
+
+
 @pytest.mark.parametrize("case", range(len(CASES)))
 def test_qp_data_equal_the_symbolic_reference_on_random_problems(case):
     """P, q, every row of A | b (as sets: the row order differs) and the cost equal the CasADi
     formulation's at random linearisation points, states, objectives and butterfly cones."""
-    over, n, pairs = CASES[case]
-    s = replace(MPCSettings(horizon=4, constraint_horizon=2), **over)
-    st = Structure(n, s.horizon, s.constraint_horizon, tuple((p.i, p.j) for p in pairs))
+    s, st = case_problem(case)
     qs = QPStructure(s, st)
     rng = np.random.default_rng(case)
     for _ in range(3):
-        x0, obj = random_case(rng, n, pairs, s)
-        d = pack(s, x0, obj, pairs)
-        d.bsign = rng.choice([-1.0, 1.0], size=d.bsign.shape)
+        d = random_step_data(rng, case, s)
         zbar = rng.normal(size=qs.lay.nz) * 0.2
         Pr, qr, Ar, br, n_eq, cost = reference_qp(s, st, zbar, d)
         P, q, A, b = qs.original(*qs.assemble(zbar, d))

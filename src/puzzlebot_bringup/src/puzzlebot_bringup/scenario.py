@@ -54,6 +54,7 @@ from typing import Dict, List, Tuple
 import numpy as np
 
 from puzzlebot_common.errors import ConfigError
+from puzzlebot_common.params import check_keys
 
 SCENARIO_KEYS = {"name", "description", "world", "start", "scatter", "steps"}
 SCATTER_KEYS = {"rows", "spacing", "lateral", "yaw", "row_spacing", "origin", "heading"}
@@ -174,10 +175,7 @@ def scatter_starts(spec, robots, seed, check=None, where="scenario.scatter"):
     """
     if not isinstance(spec, dict):
         raise ConfigError("%s: expected a mapping, got %r" % (where, spec))
-    unknown = set(spec) - SCATTER_KEYS
-    if unknown:
-        raise ConfigError("%s: unknown key(s) %s; allowed: %s"
-                          % (where, ", ".join(sorted(map(str, unknown))), ", ".join(sorted(SCATTER_KEYS))))
+    check_keys(spec, SCATTER_KEYS, where)
     rows = spec.get("rows", 1)
     if isinstance(rows, bool) or not isinstance(rows, int) or not 1 <= rows <= max(1, len(robots)):
         raise ConfigError("%s.rows: expected an integer from 1 to the robot count (%d), got %r"
@@ -229,10 +227,7 @@ def parse_scenario(data, robots, where="scenario"):
     for key in ("name", "start", "steps"):
         if key not in data:
             raise ConfigError("%s: missing '%s'" % (where, key))
-    unknown = set(data) - SCENARIO_KEYS
-    if unknown:
-        raise ConfigError("%s: unknown key(s) %s; allowed: %s"
-                          % (where, ", ".join(sorted(map(str, unknown))), ", ".join(sorted(SCENARIO_KEYS))))
+    check_keys(data, SCENARIO_KEYS, where)
     if not isinstance(data["start"], dict):
         raise ConfigError("%s.start: expected a mapping robot -> [x, y, yaw], got %r" % (where, data["start"]))
     if not isinstance(data.get("world", "flat"), str):

@@ -77,6 +77,21 @@ def point_in_convex_polygon(vertices, p, eps=0.0):
     return signed_margin(vertices, p) >= -eps
 
 
+def point_in_polygon(vertices, p):
+    """True when ``p`` is inside the simple polygon ``vertices`` (convex or not, either orientation), by
+    the crossing number of a ray towards +x; a point on an edge may fall either way.
+
+    Independent of the linear form (polygon_halfplanes): the reference the coupling rows are tested against.
+    """
+    inside = False
+    n = len(vertices)
+    for i in range(n):
+        (x1, y1), (x2, y2) = vertices[i], vertices[(i + 1) % n]
+        if (y1 > p[1]) != (y2 > p[1]) and p[0] < x1 + (p[1] - y1) * (x2 - x1) / (y2 - y1):
+            inside = not inside
+    return inside
+
+
 @dataclass(frozen=True)
 class RobotGeometry:
     """The robot's dimensions (metres, radians; defaults: facts.md), defined once for every package.

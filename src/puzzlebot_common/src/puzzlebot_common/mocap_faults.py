@@ -8,6 +8,8 @@ marker swap), broken quaternions and NaN or inf in any field (a broken
 bridge). :data:`FAULTS` maps each fault's name to the function and to the
 pose gate's rejection kind (puzzlebot_common.pose_gate) it must produce; the
 pose gate's unit tests, the driver's and the MPC's tests all use it.
+A :class:`FaultPlan` says which fault (or :data:`SILENCE`) replaces a robot's
+frames when: the rostests schedule every fault with it.
 """
 
 import math
@@ -73,3 +75,45 @@ FAULTS = {
 for _f in FIELDS:
     for _value in (math.nan, math.inf):
         FAULTS["%s = %r" % (_f, _value)] = (_field(_f, _value), pose_gate.NON_FINITE)
+
+#: Not a frame at all (the motion capture lost the robot): a FaultPlan window of no frames.
+SILENCE = "silence"
+
+
+class FaultPlan:
+    """Which fault replaces a robot's frames when: windows [t0, t1) [s] per robot, each a FAULTS name or
+    SILENCE. Windows may be added while another thread reads the plan (a rostest's publishing thread)."""
+
+    def __init__(self):
+        self.windows = {}                        # robot -> [(t0, t1, fault)]
+
+    def add(self, robot, t0, t1, fault):
+        if fault != SILENCE and fault not in FAULTS:
+            raise ValueError("unknown fault %r: a name of mocap_faults.FAULTS or SILENCE" % (fault,))
+        self.windows.setdefault(robot, []).append((t0, t1, fault))
+
+    def fault(self, robot, t):
+        """``robot``'s fault at time ``t`` [s]: a FAULTS name, SILENCE, or None (clean frames); of
+        overlapping windows, the first added."""
+        return next((f for t0, t1, f in self.windows.get(robot, ()) if t0 <= t < t1), None)
+
+    def frame(self, robot, stamp, x, y, yaw):
+        """The MocapFrame published for ``robot``'s true pose at ``stamp`` [s] (x, y [m], yaw [rad]): the
+        clean one, the fault's, or None under SILENCE."""
+        fault = self.fault(robot, stamp)
+        if fault == SILENCE:
+            return None
+        return clean(stamp, x, y, yaw) if fault is None else FAULTS[fault][0](stamp, x, y, yaw)
+
+    def every_fault(self, robots, t0, spacing, rate, bursts=(1, 10)):
+        """Add every fault of FAULTS once per burst length (in frames at ``rate`` [Hz]): on ``robots`` in
+        turn, as many at a time as there are robots, ``spacing`` [s] apart from ``t0`` [s], each starting
+        half a frame period after a multiple of the period (between two frames of a stream stamped on
+        that grid). Returns the schedule [(robot, fault, burst, start [s])] in that order."""
+        schedule = []
+        for i, (fault, burst) in enumerate((f, b) for f in sorted(FAULTS) for b in bursts):
+            robot, t = robots[i % len(robots)], t0 + spacing * (i // len(robots))
+            t = math.floor(t * rate) / rate + 0.5 / rate
+            schedule.append((robot, fault, burst, t))
+            self.add(robot, t, t + burst / rate, fault)
+        return schedule

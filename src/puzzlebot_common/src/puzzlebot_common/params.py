@@ -39,6 +39,14 @@ def _coerce(default, value, where):
     return value
 
 
+def check_keys(data, allowed, where):
+    """Raise ConfigError naming ``where`` and the allowed keys when mapping ``data`` has any other key."""
+    unknown = set(data) - set(allowed)
+    if unknown:
+        raise ConfigError("%s: unknown key(s) %s; allowed: %s"
+                          % (where, ", ".join(sorted(map(str, unknown))), ", ".join(sorted(allowed))))
+
+
 def from_mapping(cls, data, where):
     """Instance of dataclass ``cls`` with defaults overridden by ``data``.
 

@@ -18,6 +18,7 @@ from typing import Optional
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.names import vicon_topic
+from puzzlebot_common.params import check_keys
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _KNOWN_KEYS = {"name", "pilot", "mocap", "ip_octet"}
@@ -57,10 +58,7 @@ def parse_robot(entry, where="robot"):
         return RobotSpec(name=_check_name(entry, where))
     if not isinstance(entry, dict):
         raise ConfigError("%s: expected a mapping with at least 'name', got %r" % (where, entry))
-    unknown = set(entry) - _KNOWN_KEYS
-    if unknown:
-        raise ConfigError("%s: unknown key(s) %s; allowed: %s"
-                          % (where, ", ".join(sorted(map(str, unknown))), ", ".join(sorted(_KNOWN_KEYS))))
+    check_keys(entry, _KNOWN_KEYS, where)
     if "name" not in entry:
         raise ConfigError("%s: missing 'name'" % where)
     name = _check_name(entry["name"], where + ".name")

@@ -2,31 +2,13 @@
 
 One status per robot -- mocap rate and age, the pose gate's state and
 rejection counts, link state, last PWM and why, command and estimate -- and
-one for the loop (achieved rate and jitter).
-The node turns these into a diagnostic_msgs/DiagnosticArray on /diagnostics.
+one for the loop (achieved rate and jitter), as puzzlebot_common.diagnostics
+statuses. The node turns these into a diagnostic_msgs/DiagnosticArray on /diagnostics.
 """
 
-from dataclasses import dataclass, field
-from typing import List, Tuple
-
+from puzzlebot_common.diagnostics import OK, WARN, Status, fmt
 from puzzlebot_common.pose_gate import KINDS
 from puzzlebot_driver import safety
-
-# diagnostic_msgs/DiagnosticStatus levels
-OK, WARN, ERROR = 0, 1, 2
-
-
-@dataclass
-class Status:
-    name: str
-    level: int
-    message: str
-    hardware_id: str = ""
-    values: List[Tuple[str, str]] = field(default_factory=list)
-
-
-def _fmt(x, spec="%.3f"):
-    return "n/a" if x is None else spec % x
 
 
 def robot_status(state, link, estimate, now, params, loop_rate=None, prefix="puzzlebot_driver"):
@@ -54,15 +36,15 @@ def robot_status(state, link, estimate, now, params, loop_rate=None, prefix="puz
         ("lines received (ignored)", str(link.lines_received if link else 0)),
         ("last link error", link.last_error if link else ""),
         ("mocap rate [Hz]", "%.1f" % state.mocap_rate()),
-        ("mocap age [s]", _fmt(age)),
+        ("mocap age [s]", fmt(age)),
         ("pose stale after [s]", "%.3f" % params.pose_timeout),
         ("pwm left", str(d.left)),
         ("pwm right", str(d.right)),
         ("reason", d.reason),
-        ("cmd v [m/s]", _fmt(cmd[0], "%.4f")),
-        ("cmd w [rad/s]", _fmt(cmd[1], "%.4f")),
-        ("est v [m/s]", _fmt(est[0], "%.4f")),
-        ("est w [rad/s]", _fmt(est[1], "%.4f")),
+        ("cmd v [m/s]", fmt(cmd[0], "%.4f")),
+        ("cmd w [rad/s]", fmt(cmd[1], "%.4f")),
+        ("est v [m/s]", fmt(est[0], "%.4f")),
+        ("est w [rad/s]", fmt(est[1], "%.4f")),
         ("rejected commands", str(state.rejected_commands)),
         ("rejected poses", str(state.rejected_poses)),
     ]
@@ -76,7 +58,7 @@ def robot_status(state, link, estimate, now, params, loop_rate=None, prefix="puz
     values += [
         ("loop faults (PWM 0)", str(state.loop_faults)),
         ("pilot", str(state.pilot).lower()),
-        ("loop rate [Hz]", _fmt(loop_rate, "%.2f")),
+        ("loop rate [Hz]", fmt(loop_rate, "%.2f")),
     ]
     return Status("%s: %s" % (prefix, state.name), level, message,
                   "%s (ip octet %d)" % (state.name, state.ip_octet), values)

@@ -238,20 +238,26 @@ def solver_table(results, horizon=10):
     return "\n".join(lines)
 
 
+def _matched(results, others):
+    """(result, other) for each of ``others`` with a result of the same robots and horizon (the first
+    such result), in the order of ``others``."""
+    for other in others:
+        mine = [r for r in results if (r["robots"], r["horizon"]) == (other["robots"], other["horizon"])]
+        if mine:
+            yield mine[0], other
+
+
 def solver_comparison_table(results, clarabel):
     """The default solver against Clarabel, the same N run right after each other."""
     name = results[0].get("solver", "default") if results else "default"
     rows = ["| N, Hm | %s: step median / p95 [ms] | Clarabel: step median / p95 [ms] | in the solver: %s / "
             "Clarabel, median [ms] | QP iterations | ratio of step medians |" % (name, name),
             "|---|---|---|---|---|---|"]
-    for ref in clarabel:
-        mine = [r for r in results if (r["robots"], r["horizon"]) == (ref["robots"], ref["horizon"])]
-        if mine:
-            m = mine[0]
-            rows.append("| %d, %d | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %g / %g | %.1fx |" % (
-                ref["robots"], ref["horizon"], m["median_ms"], m["p95_ms"], ref["median_ms"], ref["p95_ms"],
-                m["solver_median_ms"], ref["solver_median_ms"], m["qp_iterations_median"],
-                ref["qp_iterations_median"], ref["median_ms"] / m["median_ms"]))
+    for m, ref in _matched(results, clarabel):
+        rows.append("| %d, %d | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %g / %g | %.1fx |" % (
+            ref["robots"], ref["horizon"], m["median_ms"], m["p95_ms"], ref["median_ms"], ref["p95_ms"],
+            m["solver_median_ms"], ref["solver_median_ms"], m["qp_iterations_median"],
+            ref["qp_iterations_median"], ref["median_ms"] / m["median_ms"]))
     return "\n".join(rows)
 
 
@@ -259,13 +265,10 @@ def reference_table(results, reference):
     """The RTI (the default solver) against IPOPT on the full NLP, same run and robots."""
     rows = ["| N, Hm | RTI (%s): median / p95 [ms] | IPOPT, full NLP: median / p95 [ms] | ratio of medians |"
             % (results[0].get("solver", "default") if results else "default"), "|---|---|---|---|"]
-    for ref in reference:
-        mine = [r for r in results if (r["robots"], r["horizon"]) == (ref["robots"], ref["horizon"])]
-        if mine:
-            m = mine[0]
-            rows.append("| %d, %d | %.1f / %.1f | %.1f / %.1f | %.0fx |" % (
-                ref["robots"], ref["horizon"], m["median_ms"], m["p95_ms"], ref["median_ms"], ref["p95_ms"],
-                ref["median_ms"] / m["median_ms"]))
+    for m, ref in _matched(results, reference):
+        rows.append("| %d, %d | %.1f / %.1f | %.1f / %.1f | %.0fx |" % (
+            ref["robots"], ref["horizon"], m["median_ms"], m["p95_ms"], ref["median_ms"], ref["p95_ms"],
+            ref["median_ms"] / m["median_ms"]))
     return "\n".join(rows)
 
 

@@ -141,6 +141,25 @@ class OcpLayout:
     def inputs(self, z):
         return z[self.u_idx].transpose(1, 0, 2)
 
+    def bounds(self, settings):
+        """(lb, ub) [nz] of the variables under ``settings`` (settings.MPCSettings), the one definition
+        of the box both forms share (Problem, qp.QPStructure): the inputs within dv_max, dw_max
+        [m/s^2, rad/s^2] (left out where the velocity box implies it: |dv| dt <= 2 v_max), the
+        velocities within v_max, w_max, the slacks >= 0, the butterfly slacks 0 without the butterfly
+        cones; -inf / inf elsewhere."""
+        s = settings
+        lb, ub = np.full(self.nz, -np.inf), np.full(self.nz, np.inf)
+        if s.dv_max * s.dt < 2 * s.v_max:
+            lb[self.u_idx[..., 0]], ub[self.u_idx[..., 0]] = -s.dv_max, s.dv_max
+        if s.dw_max * s.dt < 2 * s.w_max:
+            lb[self.u_idx[..., 1]], ub[self.u_idx[..., 1]] = -s.dw_max, s.dw_max
+        lb[self.x_idx[:, :, 3]], ub[self.x_idx[:, :, 3]] = -s.v_max, s.v_max
+        lb[self.x_idx[:, :, 4]], ub[self.x_idx[:, :, 4]] = -s.w_max, s.w_max
+        lb[self.slack] = 0.0
+        if not s.butterfly:
+            ub[self.sb_idx[self.sb_idx >= 0]] = 0.0
+        return lb, ub
+
 
 def params_layout(st: Structure):
     n, h, P = st.n, st.horizon, len(st.pairs)
@@ -300,20 +319,7 @@ class Problem:
         lin[L.sp_idx[L.sp_idx >= 0]] = s.w_slack_pip
         lin[L.sb_idx[L.sb_idx >= 0]] = s.w_slack_butterfly
         self.lin = lin
-        # bounds
-        lb = np.full(L.nz, -np.inf)
-        ub = np.full(L.nz, np.inf)
-        # acceleration bounds; one implied by the velocity box (|dv| dt <= 2 v_max) is left out
-        if s.dv_max * s.dt < 2 * s.v_max:
-            lb[L.u_idx[..., 0]], ub[L.u_idx[..., 0]] = -s.dv_max, s.dv_max
-        if s.dw_max * s.dt < 2 * s.w_max:
-            lb[L.u_idx[..., 1]], ub[L.u_idx[..., 1]] = -s.dw_max, s.dw_max
-        lb[L.x_idx[:, :, 3]], ub[L.x_idx[:, :, 3]] = -s.v_max, s.v_max
-        lb[L.x_idx[:, :, 4]], ub[L.x_idx[:, :, 4]] = -s.w_max, s.w_max
-        lb[L.slack] = 0.0
-        if not s.butterfly:
-            ub[L.sb_idx[L.sb_idx >= 0]] = 0.0
-        self.lb, self.ub = lb, ub
+        self.lb, self.ub = L.bounds(s)
         self.cost = ca.sumsqr(self.res) + ca.dot(ca.DM(lin), z)
 
     def _butterfly(self, ineq, x, sign, slack, ratio):

@@ -272,7 +272,7 @@ class QPStructure:
             patp = np.ones((POLY_ROWS + 2, 7), bool)
             patp[POLY_ROWS:, [0, 1, 3, 4]] = False         # heading rows: theta_i, theta_j, slack
             ineq.add("pip", Vp, patp)
-        lb, ub = self._bounds()
+        lb, ub = L.bounds(s)
         self.ub_vars, self.lb_vars = np.flatnonzero(np.isfinite(ub)), np.flatnonzero(np.isfinite(lb))
         self.b_bounds = np.concatenate([ub[self.ub_vars], -lb[self.lb_vars]])
         ineq.add("ub", self.ub_vars[:, None], np.ones((1, 1), bool))
@@ -362,21 +362,6 @@ class QPStructure:
         self.vorder = np.lexsort((np.arange(nz), stage, robot))
         self.vpos = np.empty(nz, dtype=int)
         self.vpos[self.vorder] = np.arange(nz)
-
-    def _bounds(self):
-        s, L = self.settings, self.lay
-        nz = L.nz
-        lb, ub = np.full(nz, -np.inf), np.full(nz, np.inf)
-        if s.dv_max * s.dt < 2 * s.v_max:
-            lb[L.u_idx[..., 0]], ub[L.u_idx[..., 0]] = -s.dv_max, s.dv_max
-        if s.dw_max * s.dt < 2 * s.w_max:
-            lb[L.u_idx[..., 1]], ub[L.u_idx[..., 1]] = -s.dw_max, s.dw_max
-        lb[L.x_idx[:, :, 3]], ub[L.x_idx[:, :, 3]] = -s.v_max, s.v_max
-        lb[L.x_idx[:, :, 4]], ub[L.x_idx[:, :, 4]] = -s.w_max, s.w_max
-        lb[L.slack] = 0.0
-        if not s.butterfly:
-            ub[L.sb_idx[L.sb_idx >= 0]] = 0.0
-        return lb, ub
 
     # ------------------------------------------------------------------ numbers
     def states(self, zbar, x0):

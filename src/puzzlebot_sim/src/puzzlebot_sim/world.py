@@ -475,13 +475,7 @@ class SimWorld(BulletSession):
         """(position xyz, quaternion xyzw) of the robot's anchor base in its base_link, or None without
         anchors (the sim node's tf <robot>/base_link -> <robot>/anchor)."""
         frozen = self._rest.frozen(name)
-        if frozen is not None:
-            return frozen.base
-        pose = self.anchor_pose(name)
-        if pose is None:
-            return None
-        inverse = pb.invertTransform(*self.pose(name), physicsClientId=self.client)
-        return pb.multiplyTransforms(*inverse, *pose, physicsClientId=self.client)
+        return frozen.base if frozen is not None else self.anchor_in_robot(name)
 
     def anchor_pose2d(self, name):
         pose = self.anchor_pose(name)
