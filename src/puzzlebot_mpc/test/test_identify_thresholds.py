@@ -10,6 +10,7 @@ summed cost brackets the threshold between 0.248 and 0.252.
 """
 
 import numpy as np
+import pytest
 
 import identify_synth as synth
 from puzzlebot_common.effects import NOMINAL
@@ -18,10 +19,10 @@ from puzzlebot_mpc.identify.data import RobotData
 
 TRUTH = {"deadband": {"v_min": 0.0, "w_min": 0.25}}
 V = 0.05            # m/s, every command
-HOLD = 1.5          # s each turn rate is held
+HOLD = 1.0          # s each turn rate is held
 DURATION = 45.0     # s per robot
 LATE = 32.0         # s: after the start of the last of the 3 parts (30.7 s)
-LARGE = [0.6, 0.8, 1.0, 1.2]     # rad/s: keeps the magnitudes near the threshold below their median
+LARGE = [0.6, 0.8, 1.0, 1.2, 1.4, 1.6]   # rad/s: keeps the magnitudes near the threshold below their median
 TURN_RATES = {"pz1": [0.1, 0.2, 0.32] + LARGE,
               "pz2": [0.1, 0.2, 0.248, 0.252] + LARGE,
               "pz3": [0.1, 0.24, 0.34] + LARGE}
@@ -68,9 +69,11 @@ def test_joint_threshold_is_bracketed_by_every_robots_commands():
     assert fit.joint_threshold(fits, own, "w_min") == common["w_min"]
 
 
-def test_joint_threshold_sees_only_the_windows_of_its_masks():
-    """pz2's commands near the threshold come only in the last third: fitted without it (the
-    cross-validation fold that holds it out), the threshold is set by the other commands alone."""
+def test_thresholds_see_only_the_windows_of_their_masks():
+    """pz2's commands near the threshold come only in the last part: fitted without it (the
+    cross-validation fold that holds it out), each threshold lies halfway between the largest
+    magnitude the training windows show zeroed and the smallest they show passing; the held-out
+    commands do not move it."""
     rates = dict(TURN_RATES, pz2=[0.1, 0.2] + LARGE)
     robots = [robot(n, r, seed, TURN_RATES["pz2"] if n == "pz2" else None)
               for seed, (n, r) in enumerate(rates.items())]
@@ -78,9 +81,10 @@ def test_joint_threshold_sees_only_the_windows_of_its_masks():
     held_out = settings.cv_folds - 1
     assert all(rf.windows.te[rf.windows.fit_mask(held_out)].max() < LATE for rf in fits)
     own = own_fits(fits, lambda rf: rf.windows.fit_mask(held_out))
+    # pz2 alone: 0.2 zeroed, 0.6 passing; pz1: 0.2 / 0.32; pz3: 0.24 / 0.34
+    assert [p["w_min"] for p in own] == pytest.approx([0.26, 0.4, 0.29], abs=1e-12)
     masked = fit.joint_threshold(fits, own, "w_min", [rf.windows.fit_mask(held_out) for rf in fits])
-    assert 0.24 < masked < 0.32                         # between what pz1 and pz3 show in training
-    assert not BRACKET[0] < masked < BRACKET[1]
+    assert masked == pytest.approx(0.5 * (0.24 + 0.32), abs=1e-12)
     everything = fit.joint_threshold(fits, own_fits(fits), "w_min")
     assert BRACKET[0] < everything < BRACKET[1]
 

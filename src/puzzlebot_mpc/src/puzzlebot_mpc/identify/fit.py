@@ -7,7 +7,9 @@ parameter of the model at once (scipy ``least_squares``, bounded, finite
 differences). Parameters with several local minima get a grid scan first
 (delay, heading offset, acceleration limits); deadband thresholds change the
 error only where they cross a commanded value and are set by a
-coarse-to-fine scan over the midpoints between commanded values.
+coarse-to-fine scan over the intervals between commanded values, halfway
+between the largest value the windows show zeroed and the smallest they show
+passing (``scan_threshold``).
 
 Cross-validation: each robot's record is cut into ``cv_folds`` parts in time;
 part k is predicted by the parameters fitted on the windows that do not
@@ -165,44 +167,57 @@ def size(name, params, ctx, settings):
     return CANDIDATES[name].size(params, ctx, settings)
 
 
-def threshold_candidates(commands, up_to_median=False):
-    """0 and the midpoints between the distinct nonzero magnitudes of ``commands`` (only those up to
-    their median with ``up_to_median``): a threshold anywhere between two of them fits alike, so
-    these are the thresholds worth trying."""
+def threshold_bounds(commands, up_to_median=False):
+    """0 and the distinct nonzero magnitudes of ``commands``, ascending (only those up to their
+    median with ``up_to_median``): a threshold anywhere between two consecutive ones zeroes the same
+    commands, so the intervals between them are the thresholds worth telling apart."""
     mags = np.unique(np.abs(np.asarray(commands, dtype=float)))
     mags = mags[mags > 0]
-    if mags.size == 0:
-        return np.zeros(1)
-    if up_to_median:
+    if up_to_median and mags.size:
         mags = mags[mags <= np.median(mags)]
-    return np.concatenate([[0.0, 0.5 * mags[0]], 0.5 * (mags[:-1] + mags[1:])])
+    return np.concatenate([[0.0], mags])
 
 
-def scan_threshold(cost, cands, coarse=False):
-    """The threshold among the ascending ``cands`` with the lowest ``cost(value)``.
+def scan_threshold(cost, bounds, coarse=False, start=None):
+    """The threshold that fits best, ``cost(value)`` evaluated at the middle of the intervals between
+    consecutive ``bounds`` (ascending, ``threshold_bounds``).
 
-    Coarse-to-fine scan: SCAN_POINTS candidates spread over the range, then the range between the
-    best one's neighbours, until every candidate in it was tried. Neighbouring candidates that fit
-    equally well (no window sees a command between them) form one flat stretch: its middle is
-    returned. ``coarse``: the best of SCREEN_THRESHOLDS candidates spread over the range."""
-    lo, hi = 0, cands.size - 1
+    Coarse to fine: SCAN_POINTS intervals spread over the range (``start``: (first, last) interval;
+    default: all), then the range between the best one's neighbours, until every interval in it was
+    tried. The best interval is then grown into its flat stretch, beyond the range too (neighbours
+    that fit equally well: no window sees a command between them), and the middle between the
+    stretch's ends is returned: halfway between the largest magnitude the windows show zeroed and
+    the smallest they show passing (a command that none of the cost's windows sees, one in a
+    held-out part, does not move it). ``coarse``: the middle of the best of SCREEN_THRESHOLDS
+    intervals spread over all."""
+    mids = 0.5 * (bounds[:-1] + bounds[1:])
+    n = mids.size
+    if n == 0:
+        return 0.0
+    costs = {}
+
+    def at(i):
+        if i not in costs:
+            costs[i] = cost(float(mids[i]))
+        return costs[i]
+
     if coarse:
-        idx = np.unique(np.round(np.linspace(lo, hi, min(SCREEN_THRESHOLDS, hi + 1))).astype(int))
-        costs = [cost(float(cands[i])) for i in idx]
-        return float(cands[idx[int(np.argmin(costs))]])
+        idx = np.unique(np.round(np.linspace(0, n - 1, min(SCREEN_THRESHOLDS, n))).astype(int))
+        return float(mids[min(idx, key=at)])
+    lo, hi = start if start is not None else (0, n - 1)
     while True:
         idx = np.unique(np.round(np.linspace(lo, hi, min(SCAN_POINTS, hi - lo + 1))).astype(int))
-        costs = np.array([cost(float(cands[i])) for i in idx])
-        b = int(np.argmin(costs))
+        j = min(range(idx.size), key=lambda m: at(idx[m]))
         if idx.size == hi - lo + 1:
-            flat = costs <= costs[b] + FLAT_COST * max(abs(costs[b]), 1.0)
-            a, e = b, b
-            while a > 0 and flat[a - 1]:
-                a -= 1
-            while e < idx.size - 1 and flat[e + 1]:
-                e += 1
-            return float(0.5 * (cands[idx[a]] + cands[idx[e]]))
-        lo, hi = int(idx[max(b - 1, 0)]), int(idx[min(b + 1, idx.size - 1)])
+            break
+        lo, hi = int(idx[max(j - 1, 0)]), int(idx[min(j + 1, idx.size - 1)])
+    a = e = int(idx[j])
+    flat = at(a) + FLAT_COST * max(abs(at(a)), 1.0)
+    while a > 0 and at(a - 1) <= flat:
+        a -= 1
+    while e < n - 1 and at(e + 1) <= flat:
+        e += 1
+    return float(0.5 * (bounds[a] + bounds[e + 1]))
 
 
 class RobotFit:
@@ -216,7 +231,7 @@ class RobotFit:
         self.ctx = Context.of(r)
         self.all = np.ones(len(self.windows), bool)
         self.nfev = 0
-        self._thresholds = {k: threshold_candidates(getattr(r, attr), up_to_median=True)
+        self._thresholds = {k: threshold_bounds(getattr(r, attr), up_to_median=True)
                             for k, attr in THRESHOLDS.items()}
         self.set_weights(dict(NOMINAL))
 
@@ -597,23 +612,27 @@ def _common(values):
 def joint_threshold(fits, params, key, masks=None):
     """The deadband threshold ``key`` the robots share: the value that minimises their summed cost
     (robot i with ``params[i]`` on its windows ``masks[i]``, None: all), scanned (``scan_threshold``)
-    over the midpoints between the distinct magnitudes any robot was commanded, from one below the
-    lowest to one above the highest of the robots' own values ``params[i][key]``.
+    over the intervals between the distinct magnitudes any robot was commanded, starting from one
+    interval below the lowest to one above the highest of the robots' own values ``params[i][key]``.
 
     A robot alone resolves a threshold only to the gap between its own commanded magnitudes around
     it, and the gaps differ from robot to robot: the median of the robots' own values can zero a
     command on which another robot moves. The robots' commands together bracket the threshold as
     tightly as the closest pair around it, whichever robots they come from."""
     masks = masks if masks is not None else [rf.all for rf in fits]
-    cands = threshold_candidates(np.concatenate([getattr(rf.r, THRESHOLDS[key]) for rf in fits]))
+    bounds = threshold_bounds(np.concatenate([getattr(rf.r, THRESHOLDS[key]) for rf in fits]))
+    last = max(bounds.size - 2, 0)
+
+    def interval(value):
+        return min(max(int(np.searchsorted(bounds, value, side="right")) - 1, 0), last)
+
     own = [p[key] for p in params]
-    lo = max(int(np.searchsorted(cands, min(own), side="left")) - 1, 0)
-    hi = min(int(np.searchsorted(cands, max(own), side="right")), cands.size - 1)
+    start = (max(interval(min(own)) - 1, 0), min(interval(max(own)) + 1, last))
 
     def cost(value):
         return sum(rf.cost(dict(p, **{key: value}), m) for rf, p, m in zip(fits, params, masks))
 
-    return scan_threshold(cost, cands[lo:hi + 1])
+    return scan_threshold(cost, bounds, start=start)
 
 
 def common_values(fits, params, keys, masks=None):
