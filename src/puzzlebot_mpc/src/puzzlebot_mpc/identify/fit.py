@@ -7,7 +7,9 @@ parameter of the model at once (scipy ``least_squares``, bounded, finite
 differences). Parameters with several local minima get a grid scan first
 (delay, heading offset, acceleration limits); deadband thresholds change the
 error only where they cross a commanded value and are set by a
-coarse-to-fine scan over the midpoints between commanded values.
+coarse-to-fine scan over the intervals between commanded values, halfway
+between the largest value the windows show zeroed and the smallest they show
+passing (``scan_threshold``).
 
 Cross-validation: each robot's record is cut into ``cv_folds`` parts in time;
 part k is predicted by the parameters fitted on the windows that do not
@@ -22,7 +24,9 @@ errors (``accepts``); otherwise the next best is tried, then the loop stops.
 
 Sharing: an effect's parameters are shared by the robots unless each robot's
 own parameters predict its held-out parts clearly better (the same rule) than
-the robots' common value (the median of their fits on the same folds).
+the robots' common value (fitted on the same folds: the median of their fits;
+for a deadband threshold, the threshold that fits all robots' windows best
+together, ``joint_threshold``).
 """
 
 import math
@@ -147,6 +151,8 @@ CANDIDATES = {c.name: c for c in [
 assert set(CANDIDATES) == set(EFFECTS)
 #: Continuous parameters of every candidate.
 PARAM_SPECS = {k: spec for c in CANDIDATES.values() for k, spec in c.specs.items()}
+#: Deadband threshold parameters -> the command component they act on ("cmd_v" / "cmd_w").
+THRESHOLDS = {k: attr for c in CANDIDATES.values() for k, attr in c.thresholds.items()}
 
 
 def _normalise(p):
@@ -161,6 +167,59 @@ def size(name, params, ctx, settings):
     return CANDIDATES[name].size(params, ctx, settings)
 
 
+def threshold_bounds(commands, up_to_median=False):
+    """0 and the distinct nonzero magnitudes of ``commands``, ascending (only those up to their
+    median with ``up_to_median``): a threshold anywhere between two consecutive ones zeroes the same
+    commands, so the intervals between them are the thresholds worth telling apart."""
+    mags = np.unique(np.abs(np.asarray(commands, dtype=float)))
+    mags = mags[mags > 0]
+    if up_to_median and mags.size:
+        mags = mags[mags <= np.median(mags)]
+    return np.concatenate([[0.0], mags])
+
+
+def scan_threshold(cost, bounds, coarse=False, start=None):
+    """The threshold that fits best, ``cost(value)`` evaluated at the middle of the intervals between
+    consecutive ``bounds`` (ascending, ``threshold_bounds``).
+
+    Coarse to fine: SCAN_POINTS intervals spread over the range (``start``: (first, last) interval;
+    default: all), then the range between the best one's neighbours, until every interval in it was
+    tried. The best interval is then grown into its flat stretch, beyond the range too (neighbours
+    that fit equally well: no window sees a command between them), and the middle between the
+    stretch's ends is returned: halfway between the largest magnitude the windows show zeroed and
+    the smallest they show passing (a command that none of the cost's windows sees, one in a
+    held-out part, does not move it). ``coarse``: the middle of the best of SCREEN_THRESHOLDS
+    intervals spread over all."""
+    mids = 0.5 * (bounds[:-1] + bounds[1:])
+    n = mids.size
+    if n == 0:
+        return 0.0
+    costs = {}
+
+    def at(i):
+        if i not in costs:
+            costs[i] = cost(float(mids[i]))
+        return costs[i]
+
+    if coarse:
+        idx = np.unique(np.round(np.linspace(0, n - 1, min(SCREEN_THRESHOLDS, n))).astype(int))
+        return float(mids[min(idx, key=at)])
+    lo, hi = start if start is not None else (0, n - 1)
+    while True:
+        idx = np.unique(np.round(np.linspace(lo, hi, min(SCAN_POINTS, hi - lo + 1))).astype(int))
+        j = min(range(idx.size), key=lambda m: at(idx[m]))
+        if idx.size == hi - lo + 1:
+            break
+        lo, hi = int(idx[max(j - 1, 0)]), int(idx[min(j + 1, idx.size - 1)])
+    a = e = int(idx[j])
+    flat = at(a) + FLAT_COST * max(abs(at(a)), 1.0)
+    while a > 0 and at(a - 1) <= flat:
+        a -= 1
+    while e < n - 1 and at(e + 1) <= flat:
+        e += 1
+    return float(0.5 * (bounds[a] + bounds[e + 1]))
+
+
 class RobotFit:
     """One robot's windows (every window of its record, labelled with its part), its weights and
     the cost of a parameter set on a subset of the windows."""
@@ -172,8 +231,8 @@ class RobotFit:
         self.ctx = Context.of(r)
         self.all = np.ones(len(self.windows), bool)
         self.nfev = 0
-        self._thresholds = {k: self._threshold_candidates(attr) for c in CANDIDATES.values()
-                            for k, attr in c.thresholds.items()}
+        self._thresholds = {k: threshold_bounds(getattr(r, attr), up_to_median=True)
+                            for k, attr in THRESHOLDS.items()}
         self.set_weights(dict(NOMINAL))
 
     @property
@@ -200,16 +259,6 @@ class RobotFit:
         r = self.residuals(params, self.all if mask is None else mask)
         return float(r @ r)
 
-    def _threshold_candidates(self, attr):
-        """0 and the midpoints between the distinct magnitudes commanded, up to their median (a
-        threshold anywhere between two of them fits alike: take the middle)."""
-        mags = np.unique(np.abs(getattr(self.r, attr)))
-        mags = mags[mags > 0]
-        if mags.size == 0:
-            return np.zeros(1)
-        mags = mags[mags <= np.median(mags)]
-        return np.concatenate([[0.0, 0.5 * mags[0]], 0.5 * (mags[:-1] + mags[1:])])
-
     # ------------------------------------------------------------ fitting
     def _scan(self, params, keys, values, mask):
         """The best of ``values`` for the parameter ``keys`` (a name, or a tuple of names with rows of
@@ -224,29 +273,8 @@ class RobotFit:
         return best
 
     def _scan_threshold(self, params, key, mask, coarse=False):
-        """Coarse-to-fine scan: SCAN_POINTS candidates spread over the range, then the range between
-        the best one's neighbours, until every candidate in it was tried. Neighbouring candidates
-        that fit equally well (no window sees a command between them) form one flat stretch: its
-        middle is returned. ``coarse``: the best of SCREEN_THRESHOLDS candidates spread over the range."""
-        cands = self._thresholds[key]
-        lo, hi = 0, cands.size - 1
-        if coarse:
-            idx = np.unique(np.round(np.linspace(lo, hi, min(SCREEN_THRESHOLDS, hi + 1))).astype(int))
-            costs = [self.cost(dict(params, **{key: float(cands[i])}), mask) for i in idx]
-            return float(cands[idx[int(np.argmin(costs))]])
-        while True:
-            idx = np.unique(np.round(np.linspace(lo, hi, min(SCAN_POINTS, hi - lo + 1))).astype(int))
-            costs = np.array([self.cost(dict(params, **{key: float(cands[i])}), mask) for i in idx])
-            b = int(np.argmin(costs))
-            if idx.size == hi - lo + 1:
-                flat = costs <= costs[b] + FLAT_COST * max(abs(costs[b]), 1.0)
-                a, e = b, b
-                while a > 0 and flat[a - 1]:
-                    a -= 1
-                while e < idx.size - 1 and flat[e + 1]:
-                    e += 1
-                return float(0.5 * (cands[idx[a]] + cands[idx[e]]))
-            lo, hi = int(idx[max(b - 1, 0)]), int(idx[min(b + 1, idx.size - 1)])
+        return scan_threshold(lambda value: self.cost(dict(params, **{key: value}), mask), self._thresholds[key],
+                              coarse)
 
     def _least_squares(self, params, keys, mask, max_nfev):
         lower = np.array([PARAM_SPECS[k].lower for k in keys])
@@ -576,8 +604,49 @@ def eliminate(fits, names, params, cv, settings, say=lambda msg: None):
 
 # ---------------------------------------------------------------- sharing
 def _common(values):
-    """The robots' common value of a parameter: their median (an absent limit counts as infinite)."""
+    """The robots' common value of a continuous parameter: their median (an absent limit counts as
+    infinite)."""
     return float(np.median(np.asarray(values, dtype=float)))
+
+
+def joint_threshold(fits, params, key, masks=None):
+    """The deadband threshold ``key`` the robots share: the value that minimises their summed cost
+    (robot i with ``params[i]`` on its windows ``masks[i]``, None: all), scanned (``scan_threshold``)
+    over the intervals between the distinct magnitudes any robot was commanded, starting from one
+    interval below the lowest to one above the highest of the robots' own values ``params[i][key]``.
+
+    A robot alone resolves a threshold only to the gap between its own commanded magnitudes around
+    it, and the gaps differ from robot to robot: the median of the robots' own values can zero a
+    command on which another robot moves. The robots' commands together bracket the threshold as
+    tightly as the closest pair around it, whichever robots they come from."""
+    masks = masks if masks is not None else [rf.all for rf in fits]
+    bounds = threshold_bounds(np.concatenate([getattr(rf.r, THRESHOLDS[key]) for rf in fits]))
+    last = max(bounds.size - 2, 0)
+
+    def interval(value):
+        return min(max(int(np.searchsorted(bounds, value, side="right")) - 1, 0), last)
+
+    own = [p[key] for p in params]
+    start = (max(interval(min(own)) - 1, 0), min(interval(max(own)) + 1, last))
+
+    def cost(value):
+        return sum(rf.cost(dict(p, **{key: value}), m) for rf, p, m in zip(fits, params, masks))
+
+    return scan_threshold(cost, bounds, start=start)
+
+
+def common_values(fits, params, keys, masks=None):
+    """The robots' common values of the parameters ``keys``, from their own fits ``params`` (one dict
+    per robot) on the windows ``masks`` (one mask per robot; None: all windows): the median of their
+    fits for a continuous parameter (``_common``); then each deadband threshold fitted to all robots
+    together (``joint_threshold``), the continuous ones at their common values."""
+    out = {key: _common([p[key] for p in params]) for key in keys if key not in THRESHOLDS}
+    start = [dict(p, **out) for p in params]
+    for key in keys:
+        if key in THRESHOLDS:
+            out[key] = joint_threshold(fits, start, key, masks)
+            start = [dict(p, **{key: out[key]}) for p in start]
+    return out
 
 
 def finish(fits, sel, cv, settings, say=lambda msg: None):
@@ -589,10 +658,14 @@ def finish(fits, sel, cv, settings, say=lambda msg: None):
     if len(fits) == 1:
         sel.shared = list(sel.names)
         return
+
+    def fold_common(keys, k):
+        return common_values(fits, [cv.fold_params[i][k] for i in range(len(fits))], keys,
+                             [rf.windows.fit_mask(k) for rf in fits])
+
     for name in sel.names:
         keys = EFFECTS[name]
-        common = {k: {key: _common([cv.fold_params[i][k][key] for i in range(len(fits))]) for key in keys}
-                  for k in range(settings.cv_folds)}
+        common = {k: fold_common(keys, k) for k in range(settings.cv_folds)}
         shared_errs = with_params(fits, cv, lambda i, k, p: dict(p, **common[k]))
         own_better, reason = accepts(settings, fits, shared_errs, cv.errors)
         values = {rf.name: {key: sel.params[i][key] for key in keys} for i, rf in enumerate(fits)}
@@ -601,7 +674,8 @@ def finish(fits, sel, cv, settings, say=lambda msg: None):
         if not own_better:
             sel.shared.append(name)
         say("sharing %s: %s (%s)" % (name, "per robot" if own_better else "shared", reason))
-    common_all = {key: _common([p[key] for p in sel.params]) for n in sel.shared for key in EFFECTS[n]}
+    shared_keys = [key for n in sel.shared for key in EFFECTS[n]]
+    common_all = common_values(fits, sel.params, shared_keys)
     own = [n for n in sel.names if n not in sel.shared]
     params = []
     for rf, p in zip(fits, sel.params):
@@ -617,11 +691,10 @@ def finish(fits, sel, cv, settings, say=lambda msg: None):
                 params[i].update({k: NOMINAL[k] for k in EFFECTS[n]})
                 pruned.setdefault(rf.name, []).append(n)
     sel.params, sel.pruned = params, pruned
+    common = {k: fold_common(shared_keys, k) for k in range(settings.cv_folds)}
 
     def final(i, k, p):
-        q = dict(p)
-        for n in sel.shared:
-            q.update({key: _common([cv.fold_params[j][k][key] for j in range(len(fits))]) for key in EFFECTS[n]})
+        q = dict(p, **common[k])
         for n in pruned.get(fits[i].name, []):
             q.update({key: NOMINAL[key] for key in EFFECTS[n]})
         return q
