@@ -90,3 +90,15 @@ def test_set_overrides_are_checked_and_reach_the_controller(monkeypatch):
         st.run_task((SCENARIOS, "pair_cycle", 1, 0, {"dock_pull_test": True, "insert_timeout": 2.5}))
     assert seen[0].dock_pull_test is True and seen[0].insert_timeout == 2.5
     assert seen[0].docking_settings().pull_test is True
+
+
+def test_a_failed_step_says_both_what_timed_out_and_what_bullet_contradicts():
+    from puzzlebot_experiments.scenario_trials import step_failure
+
+    timeout = {"state": "failed", "problems": ["pz3-pz4 not seated"],
+               "message": "timeout after 180.00 s; not coupled: anchor pz7->pz8 (head_aligned)"}
+    assert step_failure(timeout) == "pz3-pz4 not seated; timeout after 180.00 s; not coupled: anchor pz7->pz8 " \
+                                    "(head_aligned)"
+    assert step_failure(dict(timeout, problems=[])).startswith("timeout after 180.00 s")
+    assert step_failure({"state": "succeeded", "problems": ["a-b not seated", "c-d not seated"]}) == \
+        "a-b not seated, c-d not seated"

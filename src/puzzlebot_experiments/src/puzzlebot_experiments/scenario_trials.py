@@ -174,10 +174,20 @@ def failure_text(reason, width=95):
     as "timeout (90 s): not coupled: ...", whole words, at most ``width`` characters."""
     import re
 
-    text = re.sub(r"^timeout after ([0-9.]+) s; ", lambda m: "timeout (%g s): " % float(m.group(1)), str(reason))
+    text = re.sub(r"timeout after ([0-9.]+) s; ", lambda m: "timeout (%g s): " % float(m.group(1)), str(reason))
     if len(text) > width:
         text = text[:width].rsplit(" ", 1)[0].rstrip(",;:") + " ..."
     return text
+
+
+def step_failure(step):
+    """Why a step record failed, in one line: what Bullet contradicts after a step the controller called
+    done; the behaviour's message (a timeout), then what Bullet contradicts, when it did not end well."""
+    problems = ", ".join(step.get("problems", []))
+    if step.get("state") == "succeeded":
+        return problems or "failed"
+    message = step.get("message") or step.get("state", "failed")
+    return "%s; %s" % (problems, message) if problems else message
 
 
 def plot_trials(records, scenario_steps, path, title=""):
@@ -200,7 +210,7 @@ def plot_trials(records, scenario_steps, path, title=""):
                     hatch=hatches[k % len(hatches)], edgecolor="white", linewidth=0.5)
             t += st["sim_seconds"]
             if not st["ok"]:
-                why = failure_text(st["problems"][0] if st["problems"] else st.get("message", st["state"]))
+                why = failure_text(step_failure(st))
                 ax.text(t + 0.5, row, why, va="center", fontsize=7, color="C3", clip_on=False)
         t_max = max(t_max, t)
     handles = [Patch(facecolor="0.6", hatch=hatches[k % len(hatches)], edgecolor="white",
