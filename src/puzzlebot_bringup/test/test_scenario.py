@@ -103,8 +103,23 @@ def test_coupling_steps_parse_and_check():
     ({"behavior": "drive_assembly", "robots": ["pz1"], "velocity": [0.03, 0.0]}, "distance or a timeout"),
     ({"behavior": "drive_assembly", "robots": ["pz1"], "velocity": [0.03], "distance": 1}, "2 finite"),
     ({"behavior": "go_to_goal", "goals": {"pz1": [0, 0]}, "pair": ["pz1", "pz2"]}, "do not apply"),
+    ({"behavior": "couple", "target": "bridge2x2"}, "4 slots for the step's 2"),
+    ({"behavior": "couple", "target": "no_such_shape"}, "unknown target 'no_such_shape'"),
+    ({"behavior": "couple", "slots": [[0, 0, 0], [0.01, 0, 0]], "robots": ["pz1", "pz2"]}, "overlap"),
+    ({"behavior": "couple", "slots": [[0, 0, 0], [0.5, 0, 0]], "robots": ["pz1", "pz2"]}, "connected"),
 ])
 def test_bad_coupling_steps_name_the_problem(step, fragment):
     with pytest.raises(ConfigError) as e:
         parse_scenario({"name": "x", "start": {}, "steps": [step]}, ROBOTS)
     assert fragment in str(e.value)
+
+
+def test_a_target_the_robots_cannot_form_is_an_error_at_load():
+    three = ["pz1", "pz2", "pz3"]
+    with pytest.raises(ConfigError, match="even number of robots"):
+        parse_scenario({"name": "x", "start": {}, "steps": [{"behavior": "couple", "target": "grid"}]}, three)
+    with pytest.raises(ConfigError, match="3 slots for the step's 2"):
+        parse_scenario({"name": "x", "start": {}, "steps": [
+            {"behavior": "couple", "target": "line3", "robots": ["pz1", "pz2"]}]}, three)
+    ok = parse_scenario({"name": "x", "start": {}, "steps": [{"behavior": "couple", "target": "line3"}]}, three)
+    assert ok.steps[0].target == "line3"

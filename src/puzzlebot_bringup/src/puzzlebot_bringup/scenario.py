@@ -213,6 +213,24 @@ def scatter_starts(spec, robots, seed, check=None, where="scenario.scatter"):
                       % (where, SCATTER_REDRAWS, last))
 
 
+def check_target(step, n, where):
+    """A couple step's target must be one the MPC can form with its ``n`` robots: a generator, a target of
+    puzzlebot_mpc/config/targets.yaml or valid slots (no overlap, one connected assembly), one slot per
+    robot. Raise ConfigError naming the step, at load rather than when the step runs."""
+    from puzzlebot_common.geometry import RobotGeometry
+    from puzzlebot_mpc.config_files import load_target_file
+    from puzzlebot_mpc.targets import TargetError, resolve_target
+
+    geometry = RobotGeometry()
+    try:
+        target = resolve_target(step.target, step.slots, n, load_target_file(geometry), geometry)
+    except TargetError as e:
+        raise ConfigError("%s: %s" % (where, e))
+    if len(target.slots) != n:
+        raise ConfigError("%s: target %r has %d slots for the step's %d robots (name the robots in 'robots', "
+                          "or pick a target of %d)" % (where, target.name, len(target.slots), n, n))
+
+
 def parse_scenario(data, robots, where="scenario"):
     """Parse the ``scenario`` mapping; ``robots`` is the list of robot names.
 
@@ -270,6 +288,7 @@ def parse_scenario(data, robots, where="scenario"):
             step.slots = [tuple(_numbers(sl, 3, "%s.slots[%d]" % (w, k))) for k, sl in enumerate(s.get("slots", []))]
             if bool(step.target) == bool(step.slots):
                 raise ConfigError("%s: couple needs either 'target' or 'slots'" % w)
+            check_target(step, len(step.robots) or len(robots), w)
         elif behavior == "decouple":
             step.pair = _names(s.get("pair"), w + ".pair", robots)
             if len(step.pair) != 2:
