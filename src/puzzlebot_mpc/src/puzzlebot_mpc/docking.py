@@ -192,12 +192,17 @@ class Docking:
         """+1 when "into the partner" is forward for the mover (the opening robot), -1 when backward."""
         return 1.0 if self.mover == "j" else -1.0
 
+    def _aim_away(self, lateral):
+        """After a jam with C_a ``lateral`` [m] across the axis: aim the next approach aim_step further to the
+        other side (the side the head pushed the mover to), at most aim_max off the axis."""
+        s = self.s
+        self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+
     def jammed(self, gap, lateral, now):
         """The MPC's own insertion (``insert_by_mpc``) pushed for its timeout without getting home: aim the
         next approach to the side the mover was pushed (see the module docstring)."""
-        s = self.s
         self.attempts += 1
-        self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+        self._aim_away(lateral)
         self.best = self.best_at = None
         self.note = "insertion %d jammed (%.1f mm out, %.1f mm aside); aiming %.1f mm across" % (
             self.attempts, 1e3 * gap, 1e3 * lateral, 1e3 * self.aim)
@@ -260,7 +265,7 @@ class Docking:
                 self._to(PULL, now, "pushed home")
                 self.pull_from = gap
             elif t >= s.push_timeout:
-                self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
+                self._aim_away(lateral)
                 self._to(BACKOFF, now, "push %d did not get home (%.1f mm out, pushed %.1f mm aside after %.1f s); "
                          "aiming %.1f mm across" % (self.attempts, 1e3 * gap, 1e3 * lateral, t, 1e3 * self.aim))
         elif phase == PULL:

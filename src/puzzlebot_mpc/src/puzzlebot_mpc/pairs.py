@@ -303,23 +303,6 @@ def alignment_error(pair, pose_i, pose_j):
 
 
 # ---------------------------------------------------------------- activation
-def select_active(candidates, busy=(), order=None):
-    """Conflict-free choice of pairs to align now (a robot is in one active pair).
-
-    ``candidates``: pairs not yet coupled; ``busy``: robots that may not take
-    part; ``order``: optional key (pair -> sortable) giving the priority,
-    default the list order. Greedy in priority order: optimal for the
-    paper's rule "execute without conflict" and deterministic.
-    """
-    chosen, used = [], set(busy)
-    for pair in sorted(candidates, key=order) if order else candidates:
-        if pair.robot_i in used or pair.robot_j in used:
-            continue
-        chosen.append(pair)
-        used.update(pair.robots)
-    return chosen
-
-
 class CoupledPairs(dict):
     """The coupled pairs {key: ConnectionPair}; ``version`` counts the changes (for caches of the assemblies)."""
 
@@ -524,6 +507,10 @@ class PairBook:
         """"i", "j" or None (both hold: a loop closure) for an active pair (mover_of when not assigned)."""
         if pair.key in self.movers:
             return self.movers[pair.key]
+        return self._mover_by_size(pair)
+
+    def _mover_by_size(self, pair):
+        """mover_of with the sizes of the pair's robots' assemblies now."""
         group_of = self.groups()
         return mover_of(pair, len(group_of.get(pair.robot_i, (pair.robot_i,))),
                         len(group_of.get(pair.robot_j, (pair.robot_j,))))
@@ -553,8 +540,8 @@ class PairBook:
                           and since is not None and now - since > self.seating.align_timeout)
                 if jammed:                       # pushed in for align_timeout without getting home
                     dock.jammed(gap, lateral, now)
-                elif status == DECOUPLED and dock.approach_stalled(gap, lateral, dtheta, now):
-                    pass                         # backs off (a driven phase) and approaches again
+                elif status == DECOUPLED:        # a stalled approach backs off and approaches again
+                    dock.approach_stalled(gap, lateral, dtheta, now)
                 elif status == HEAD_INSERTED and self.dock_settings.pull_test:
                     dock.start_pull(gap, now)
                     status = HEAD_ALIGNED
@@ -624,10 +611,7 @@ class PairBook:
         """A coupled pair found open goes back to the goals, to be pushed home again."""
         del self.coupled[pair.key]
         self.monitors.pop(pair.key, None)
-        start = PUSH
-        groups = self.groups()
-        mover = mover_of(pair, len(groups.get(pair.robot_i, ())) or 1, len(groups.get(pair.robot_j, ())) or 1)
-        self.docking[pair.key] = Docking(self.dock_settings, mover, start=start, now=None)
+        self.docking[pair.key] = Docking(self.dock_settings, self._mover_by_size(pair), start=PUSH, now=None)
         self.docking[pair.key].note = "re-seating: %.1f mm open, %.1f mm off the axis" % (1e3 * gap, 1e3 * lateral)
         pair.status, pair.since, pair.confirmed = HEAD_ALIGNED, now, 0
         self.goals.append(pair)
