@@ -563,7 +563,7 @@ class MultiRobotMPC:
         pref = np.ones(n)
         c, s = np.cos(x0[:, 2]), np.sin(x0[:, 2])
         goal_on = np.asarray(o.goal_mask, bool)
-        goal = np.nan_to_num(np.asarray(o.goal, float))
+        goal = qpm.finite_or_zero(o.goal)
         along = c * (goal[:, 0] - x0[:, 0]) + s * (goal[:, 1] - x0[:, 1])
         vm = np.asarray(o.velocity_mask, float).reshape(n, -1)
         v = np.asarray(o.velocity, float)[..., 0].reshape(n, -1)

@@ -137,6 +137,13 @@ def _halfplanes(polygon, margin):
     return hp
 
 
+def finite_or_zero(a):
+    """``a`` as a float array with NaN as 0 and infinities as the largest floats (np.nan_to_num); ``a``
+    itself (no copy) when it is finite already, as it is in almost every step."""
+    a = np.asarray(a, float)
+    return a if np.isfinite(a).all() else np.nan_to_num(a)
+
+
 def pack(settings, x0, objectives, pairs):
     """StepData for all robots and ``pairs`` (PairObjective, in slot order) from Objectives.
 
@@ -144,7 +151,7 @@ def pack(settings, x0, objectives, pairs):
     """
     n, h = x0.shape[0], settings.horizon
     o = objectives
-    vel = np.nan_to_num(np.asarray(o.velocity, float))
+    vel = finite_or_zero(o.velocity)
     if vel.ndim == 2:
         vel = np.repeat(vel[:, None, :], h, axis=1)
     if vel.shape != (n, h, 2):
@@ -169,7 +176,7 @@ def pack(settings, x0, objectives, pairs):
     pt_i = np.array([pr.point_i for pr in pairs], float).reshape(P, 3)
     pt_j = np.array([pr.point_j for pr in pairs], float).reshape(P, 3)
     raw = x0[ii, 2] + pt_i[:, 2] - x0[jj, 2] - pt_j[:, 2] - math.pi
-    return StepData(x0, np.nan_to_num(np.asarray(o.goal, float)), np.asarray(o.goal_mask, float), vel, vm,
+    return StepData(x0, finite_or_zero(o.goal), np.asarray(o.goal_mask, float), vel, vm,
                     np.ones((n, h + 1)), pt_i, pt_j, np.array([float(pr.active) for pr in pairs]),
                     np.array([float(pr.coupled) for pr in pairs]), heads, g, hh,
                     np.array([pr.yaw_limit for pr in pairs], float),
