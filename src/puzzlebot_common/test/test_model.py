@@ -4,6 +4,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from puzzlebot_common import model
 from puzzlebot_common.model import NX, euler_step, unicycle_arc
 
 
@@ -39,3 +40,14 @@ def test_same_function_for_numpy_and_casadi():
     f = ca.Function("f", [x, u], [euler_step(x, u, 0.1)])
     x0, u0 = np.array([0.1, 0.2, 0.3, 0.04, -0.5]), np.array([1.0, -2.0])
     assert np.allclose(np.asarray(f(x0, u0)).ravel(), euler_step(x0, u0, 0.1))
+
+
+def test_rollout_gives_the_numbers_of_the_euler_steps_in_turn():
+    rng = np.random.default_rng(3)
+    x0, u = rng.uniform(-2, 2, (6, NX)), rng.uniform(-3, 3, (6, 10, 2))
+    X = model.euler_rollout(x0, u, 0.1)
+    assert X.shape == (6, 11, NX) and np.array_equal(X[:, 0], x0)
+    x = x0.T
+    for k in range(10):
+        x = euler_step(x, u[:, k].T, 0.1)
+        assert np.array_equal(X[:, k + 1], x.T)     # the same numbers, not only close ones

@@ -47,17 +47,37 @@ def compose(pose, rel):
     return np.array([p[0], p[1], wrap_angle(pose[2] + rel[2])])
 
 
+_HALFPLANES = {}        # (shape, bytes) of a polygon's vertices -> (G, h, row norms of G), read-only
+_HALFPLANES_MAX = 256   # polygons kept (a robot's few constant ones; the cache is cleared when full)
+
+
+def _halfplanes(vertices):
+    """(G, h, row norms of G) of a convex polygon (see polygon_halfplanes), computed once per polygon:
+    the coupling and footprint polygons are constant, and the pair bookkeeping asks for them every step."""
+    a = np.asarray(vertices, dtype=float)
+    key = (a.shape, a.tobytes())
+    hp = _HALFPLANES.get(key)
+    if hp is None:
+        b = np.roll(a, -1, axis=0)
+        g = np.stack([b[:, 1] - a[:, 1], -(b[:, 0] - a[:, 0])], axis=1)
+        hp = (g, np.einsum("ij,ij->i", g, a), np.linalg.norm(g, axis=1))
+        for x in hp:
+            x.setflags(write=False)
+        if len(_HALFPLANES) >= _HALFPLANES_MAX:
+            _HALFPLANES.clear()
+        _HALFPLANES[key] = hp
+    return hp
+
+
 def polygon_halfplanes(vertices):
     """Linear form of point-in-convex-polygon (paper, eq. "pip").
 
     For counter-clockwise vertices A_1..A_K returns ``(G, h)`` with
     ``G @ p <= h`` exactly when ``p`` lies inside or on the polygon. Row k is
-    ``[y_{k+1} - y_k, -(x_{k+1} - x_k)] (p - A_k) <= 0``.
+    ``[y_{k+1} - y_k, -(x_{k+1} - x_k)] (p - A_k) <= 0``. The arrays are
+    read-only (cached by the vertices' values).
     """
-    a = np.asarray(vertices, dtype=float)
-    b = np.roll(a, -1, axis=0)
-    g = np.stack([b[:, 1] - a[:, 1], -(b[:, 0] - a[:, 0])], axis=1)
-    h = np.einsum("ij,ij->i", g, a)
+    g, h, _ = _halfplanes(vertices)
     return g, h
 
 
@@ -67,8 +87,7 @@ def signed_margin(vertices, p):
     The minimum over edges of the signed distance to the edge line; for a
     point outside it is a lower bound (in magnitude) of the Euclidean distance.
     """
-    g, h = polygon_halfplanes(vertices)
-    norms = np.linalg.norm(g, axis=1)
+    g, h, norms = _halfplanes(vertices)
     return float(np.min((h - g @ np.asarray(p, dtype=float)) / norms))
 
 

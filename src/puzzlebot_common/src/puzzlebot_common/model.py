@@ -54,6 +54,26 @@ def euler_step(x, u, dt):
                     w + dt * dw], x)
 
 
+def euler_rollout(x0, u, dt):
+    """States of H Euler steps from ``x0`` (n, NX) under the inputs ``u`` (n, H, NU): (n, H + 1, NX), x0
+    first; numpy only. The same numbers as H calls of euler_step: each state is the running sum of its
+    increments (np.cumsum adds them in turn, as the steps do), in a few array operations for all stages."""
+    x0, u = np.asarray(x0, dtype=float), np.asarray(u, dtype=float)
+
+    def run(first, increments):                 # (n,), (n, H) -> (n, H + 1)
+        return np.cumsum(np.concatenate([first[:, None], increments], axis=1), axis=1)
+
+    v = run(x0[:, 3], dt * u[:, :, 0])
+    w = run(x0[:, 4], dt * u[:, :, 1])
+    th = run(x0[:, 2], dt * w[:, :-1])
+    step = dt * v[:, :-1]
+    X = np.empty(v.shape + (NX,))
+    X[:, :, 0] = run(x0[:, 0], step * np.cos(th[:, :-1]))
+    X[:, :, 1] = run(x0[:, 1], step * np.sin(th[:, :-1]))
+    X[:, :, 2], X[:, :, 3], X[:, :, 4] = th, v, w
+    return X
+
+
 def unicycle_arc(pose, v, w, t):
     """Exact pose after driving (v, w) constant for t seconds from ``pose``.
 

@@ -54,7 +54,7 @@ from typing import Dict, List, Optional, Tuple
 import casadi as ca
 import numpy as np
 
-from puzzlebot_common.model import NU, NX, euler_step
+from puzzlebot_common.model import NU, NX, euler_rollout, euler_step
 from puzzlebot_mpc import qp as qpm
 from puzzlebot_mpc.ocp import Problem, Structure, param_vector
 
@@ -535,12 +535,7 @@ class MultiRobotMPC:
     # --------------------------------------------------------------- helpers
     def _rollout(self, x0, vw0, U):
         """States from the measured pose, the command (v_0, w_0) and the inputs (nonlinear model)."""
-        X = np.zeros((self.n, U.shape[1] + 1, NX))
-        X[:, 0, :3] = x0[:, :3]
-        X[:, 0, 3:] = vw0
-        for k in range(U.shape[1]):
-            X[:, k + 1] = euler_step(X[:, k].T, U[:, k].T, self.settings.dt).T
-        return X
+        return euler_rollout(np.concatenate([x0[:, :3], vw0], axis=1), U, self.settings.dt)
 
     def _initial_guess(self, x0):
         """Linearisation point (X (N, H+1, 5), U (N, H, 2), cold): the previous solution shifted by one
@@ -551,10 +546,8 @@ class MultiRobotMPC:
         """
         h, n, dt = self.settings.horizon, self.n, self.settings.dt
         if self._warm is None:
-            X = np.repeat(x0[:, None, :], h + 1, axis=1)
-            for k in range(1, h + 1):   # keep moving at the current velocity
-                X[:, k] = euler_step(X[:, k - 1].T, np.zeros((NU, n)), dt).T
-            return X, np.zeros((n, h, NU)), True
+            U = np.zeros((n, h, NU))
+            return euler_rollout(x0, U, dt), U, True       # keep moving at the current velocity
         Xo, Uo = self._warm
         x0[:, 2] = Xo[:, 1, 2] + np.remainder(x0[:, 2] - Xo[:, 1, 2] + math.pi, 2 * math.pi) - math.pi
         X = np.empty_like(Xo)
@@ -570,7 +563,7 @@ class MultiRobotMPC:
         pref = np.ones(n)
         c, s = np.cos(x0[:, 2]), np.sin(x0[:, 2])
         goal_on = np.asarray(o.goal_mask, bool)
-        goal = np.nan_to_num(np.asarray(o.goal, float))
+        goal = qpm.finite_or_zero(o.goal)
         along = c * (goal[:, 0] - x0[:, 0]) + s * (goal[:, 1] - x0[:, 1])
         vm = np.asarray(o.velocity_mask, float).reshape(n, -1)
         v = np.asarray(o.velocity, float)[..., 0].reshape(n, -1)

@@ -85,6 +85,36 @@ def _matvec(M, x):
     return np.matmul(M, x[:, :, None])[:, :, 0]
 
 
+def _jtj_terms(pat):
+    """The upper entries (a, b) (a <= b, local variables) of J'J for a residual block of pattern ``pat`` (m, k)
+    and their products: entry e of J'J is the sum of Jf[ta] * Jf[tb] over the terms starts[e] <= t <
+    starts[e + 1] (Jf: the block's (m, k) Jacobian flattened), one for each row m that holds both variables.
+    Returns (a, b, (ta, tb, starts))."""
+    a, b = np.nonzero(np.triu((pat.T.astype(int) @ pat.astype(int)) > 0))
+    k = pat.shape[1]
+    rows = [np.flatnonzero(pat[:, x] & pat[:, y]) for x, y in zip(a, b)]
+    ta = np.concatenate([m * k + x for m, x in zip(rows, a)])
+    tb = np.concatenate([m * k + y for m, y in zip(rows, b)])
+    starts = np.cumsum([0] + [len(m) for m in rows[:-1]])
+    return a, b, (ta, tb, starts)
+
+
+def _jtj(J, terms):
+    """(B, entries) upper entries of J'J (see _jtj_terms) of the Jacobians J (B, m, k): only the
+    pattern's products (numpy's stacked matmul calls BLAS once per small matrix)."""
+    ta, tb, starts = terms
+    Jf = J.reshape(len(J), -1)
+    return np.add.reduceat(Jf[:, ta] * Jf[:, tb], starts, axis=1)
+
+
+def _columns(*cols):
+    """(B, len(cols)) array of the 1-D columns (B,): np.stack(cols, 1) without its per-call overhead."""
+    out = np.empty((len(cols[0]), len(cols)))
+    for k, c in enumerate(cols):
+        out[:, k] = c
+    return out
+
+
 _HALFPLANES = {}
 
 
@@ -107,6 +137,13 @@ def _halfplanes(polygon, margin):
     return hp
 
 
+def finite_or_zero(a):
+    """``a`` as a float array with NaN as 0 and infinities as the largest floats (np.nan_to_num); ``a``
+    itself (no copy) when it is finite already, as it is in almost every step."""
+    a = np.asarray(a, float)
+    return a if np.isfinite(a).all() else np.nan_to_num(a)
+
+
 def pack(settings, x0, objectives, pairs):
     """StepData for all robots and ``pairs`` (PairObjective, in slot order) from Objectives.
 
@@ -114,7 +151,7 @@ def pack(settings, x0, objectives, pairs):
     """
     n, h = x0.shape[0], settings.horizon
     o = objectives
-    vel = np.nan_to_num(np.asarray(o.velocity, float))
+    vel = finite_or_zero(o.velocity)
     if vel.ndim == 2:
         vel = np.repeat(vel[:, None, :], h, axis=1)
     if vel.shape != (n, h, 2):
@@ -139,7 +176,7 @@ def pack(settings, x0, objectives, pairs):
     pt_i = np.array([pr.point_i for pr in pairs], float).reshape(P, 3)
     pt_j = np.array([pr.point_j for pr in pairs], float).reshape(P, 3)
     raw = x0[ii, 2] + pt_i[:, 2] - x0[jj, 2] - pt_j[:, 2] - math.pi
-    return StepData(x0, np.nan_to_num(np.asarray(o.goal, float)), np.asarray(o.goal_mask, float), vel, vm,
+    return StepData(x0, finite_or_zero(o.goal), np.asarray(o.goal_mask, float), vel, vm,
                     np.ones((n, h + 1)), pt_i, pt_j, np.array([float(pr.active) for pr in pairs]),
                     np.array([float(pr.coupled) for pr in pairs]), heads, g, hh,
                     np.array([pr.yaw_limit for pr in pairs], float),
@@ -217,11 +254,10 @@ class QPStructure:
         # P: upper entries (a <= b in global index) of every block's J'J pattern, plus the slack diagonal
         keys, self._p_maps = [], []
         for V, pat in res_blocks:
-            jtj = (pat.T.astype(int) @ pat.astype(int)) > 0
-            a, b = np.nonzero(np.triu(jtj))
+            a, b, terms = _jtj_terms(pat)
             ga, gb = vpos[V[:, a]], vpos[V[:, b]]
             keys.append((np.minimum(ga, gb) + nz * np.maximum(ga, gb)).ravel())     # row + nz * col
-            self._p_maps.append((a, b))
+            self._p_maps.append(terms)
         slack = np.flatnonzero(L.slack)
         keys.append(vpos[slack] + nz * vpos[slack])
         allkeys = np.concatenate(keys)
@@ -301,6 +337,7 @@ class QPStructure:
         self._ub_vals = np.ones(len(self.ub_vars))
         self._lb_vals = -np.ones(len(self.lb_vars))
         self._bound_form(rpos)
+        self._step_constants()
 
     def _bound_form(self, rpos):
         """The same QP with its single-variable rows (the command's rate limit, the variable bounds) as
@@ -364,41 +401,95 @@ class QPStructure:
         self.vpos[self.vorder] = np.arange(nz)
 
     # ------------------------------------------------------------------ numbers
+    def _step_constants(self):
+        """What every step's numbers share: the robot or slot of each block row (``rs_robot``, ``ps_slot``,
+        ``pip_slot``), the pair weights by stage, and the Jacobian blocks' constant entries (templates that
+        a step copies and fills), so that a step allocates and computes only what changes."""
+        s, st, L = self.settings, self.st, self.lay
+        n, H, Hc, P = st.n, st.horizon, st.constraint_horizon, len(self.pairs)
+        dt = s.dt
+        self._x_gather = np.maximum(L.x_idx, 0)
+        self.rs_robot = np.tile(np.arange(n), H)                 # rows (k, i) of the robot stages
+        self._blocks = {name: (V, pat) for name, V, pat, _ in self._row_blocks}
+        self._block_V = [self.v0_idx, self.rs_idx]             # variables of the residual blocks (the P maps' order)
+        if P:
+            self._block_V += [self.ps_idx[self.ps_stage], self.ps_idx[self.ps_term]]
+        J0 = np.zeros((n, 5, 9))                                 # dynamics k = 0 (see _dynamics_rows)
+        J0[:, np.arange(5), np.arange(5)] = 1.0
+        J0[:, 3, 5], J0[:, 2, 6], J0[:, 4, 6] = -1.0, -dt, -1.0
+        J0[:, 3, 7], J0[:, 4, 8] = -dt, -dt
+        Jk = np.zeros(((H - 1) * n, 5, 12))                      # dynamics k = 1..H-1
+        Jk[:, np.arange(5), np.arange(5)] = 1.0
+        Jk[:, np.arange(5), 5 + np.arange(5)] = -1.0
+        Jk[:, 2, 9] = -dt
+        Jk[:, 3, 10] = Jk[:, 4, 11] = -dt
+        self._J0, self._Jk = J0, Jk
+        self._rate_vals = np.tile([1.0, -1.0], (n, 1))
+        B = (H + 1) * n                                          # butterfly rows (k, i): [sg, 1, -1], [sg, -1, -1]
+        self._bf_vals = np.tile([0.0, 1.0, -1.0, 0.0, -1.0, -1.0], (B, 1))
+        self._bf_b = np.full((B, 2), s.w_free)
+        if not P:
+            return
+        self.ps_slot = np.tile(np.arange(P), H)                  # rows (k, q) of the pair stages
+        self.pip_slot = np.tile(np.arange(P), Hc)                # rows (k, q), k <= Hc, of the coupling rows
+        self._n_ps_stage = int(self.ps_stage.sum())              # the stage rows come first (k < H), then k = H
+        term = self.ps_k == H
+        self._w_pair_pos = np.where(term, math.sqrt(s.w_pair_terminal_pos), math.sqrt(s.w_pair_stage_pos))
+        self._w_pair_angle = np.where(term, math.sqrt(s.w_pair_terminal_angle), math.sqrt(s.w_pair_stage_angle))
+        A = np.zeros((Hc * P, POLY_ROWS + 2, 7))                 # coupling rows (see _pip_rows)
+        A[:, :, 6] = -1.0
+        self._A_pip = A
+
     def states(self, zbar, x0):
         """(H+1, n, 5) states of z (the measured pose at k = 0) and (H, n, 2) inputs."""
-        L = self.lay
-        X = zbar[np.maximum(L.x_idx, 0)]
+        X = zbar[self._x_gather]
         X[0, :, :3] = x0[:, :3]
-        return X, zbar[L.u_idx]
+        return X, zbar[self.lay.u_idx]
 
     def residuals(self, z, d, jacobians=True):
         """Residual blocks at z: list of (r (B, m), J (B, m, k) or None), in the order of the P maps."""
+        X, U = self.states(z, d.x0)
+        return self._residuals(X, U, d, jacobians)
+
+    def _residuals(self, X, U, d, jacobians):
+        out = [self._command_residuals(X, d, jacobians), self._robot_residuals(X, U, d, jacobians)]
+        if len(self.pairs):
+            out.extend(self._pair_residuals(X, d, jacobians))
+        return out
+
+    def _command_residuals(self, X, d, jacobians):
+        """Stage 0: the command (v_0, w_0) tracks the stage-1 reference; rows (robot, v | w)."""
+        sv = d.vel_on * math.sqrt(self.settings.w_velocity)                    # (n, 2)
+        r = sv * (X[0, :, 3:5] - d.vref[:, 0])
+        J = None
+        if jacobians:
+            J = np.zeros((len(sv), 2, 2))
+            J[:, 0, 0], J[:, 1, 1] = sv[:, 0], sv[:, 1]
+        return r, J
+
+    def _robot_residuals(self, X, U, d, jacobians):
+        """Robot stages k = 1..H, rows (k, i): control, goal, goal lateral, rest, velocity."""
         s, st = self.settings, self.st
         n, H = st.n, st.horizon
-        X, U = self.states(z, d.x0)
-        wv = math.sqrt(s.w_velocity)
-        out = []
-        # stage 0: the command tracks the stage-1 reference
-        sv = d.vel_on * wv                                                   # (n, 2)
-        r0 = sv * (X[0, :, 3:5] - d.vref[:, 0])
-        out.append((r0, np.stack([np.stack([sv[:, 0], 0 * sv[:, 0]], 1),
-                                  np.stack([0 * sv[:, 1], sv[:, 1]], 1)], 1) if jacobians else None))
-        # robot stages k = 1..H, rows (k, i)
         x = X[1:].reshape(H * n, NX)
         u = U.reshape(H * n, NU)
-        go = np.tile(d.goal_on, H)
+        robot = self.rs_robot
+        go = d.goal_on[robot]
         gl = go * math.sqrt(s.w_goal_lateral)
         gg = go * self.rs_wgoal
         gr = go * math.sqrt(s.w_rest)
-        vm = np.tile(d.vel_on, (H, 1)) * wv
+        vm = d.vel_on[robot] * math.sqrt(s.w_velocity)
         vr = d.vref.transpose(1, 0, 2).reshape(H * n, 2)
-        goal = np.tile(d.goal, (H, 1))
+        goal = d.goal[robot]
         c, sn = np.cos(x[:, 2]), np.sin(x[:, 2])
         dx, dy = x[:, 0] - goal[:, 0], x[:, 1] - goal[:, 1]
         wc = math.sqrt(s.w_control)
-        r = np.stack([wc * u[:, 0], wc * u[:, 1], gg * dx, gg * dy, gl * (-sn * dx + c * dy),
-                      gr * x[:, 3], gr * x[:, 4], vm[:, 0] * (x[:, 3] - vr[:, 0]),
-                      vm[:, 1] * (x[:, 4] - vr[:, 1])], axis=1)
+        r = np.empty((H * n, 9))
+        r[:, 0:2] = wc * u
+        r[:, 2], r[:, 3] = gg * dx, gg * dy
+        r[:, 4] = gl * (-sn * dx + c * dy)
+        r[:, 5:7] = gr[:, None] * x[:, 3:5]
+        r[:, 7:9] = vm * (x[:, 3:5] - vr)
         J = None
         if jacobians:
             J = np.zeros((H * n, 9, _RS_VARS))
@@ -407,59 +498,47 @@ class QPStructure:
             J[:, 4, 2], J[:, 4, 3], J[:, 4, 4] = -gl * sn, gl * c, gl * (-c * dx - sn * dy)
             J[:, 5, 5] = J[:, 6, 6] = gr
             J[:, 7, 5], J[:, 8, 6] = vm[:, 0], vm[:, 1]
-        out.append((r, J))
-        if len(self.pairs):
-            out.extend(self._pair_residuals(X, d, jacobians))
-        return out
+        return r, J
 
     def _pair_residuals(self, X, d, jacobians):
+        """Pair stages k = 1..H, rows (k, q): alignment (dp_x, dp_y, tan(dtheta / 2)) and facing; two
+        blocks: k < H, and k = H without the facing rows."""
         s, H = self.settings, self.st.horizon
         P = len(self.pairs)
-        k = self.ps_k
         xi = X[1:, self.pairs[:, 0], :3].reshape(H * P, 3)
         xj = X[1:, self.pairs[:, 1], :3].reshape(H * P, 3)
-        act, conn = np.tile(d.act, H), np.tile(d.conn, H)
-        a, b = np.tile(d.pt_i, (H, 1)), np.tile(d.pt_j, (H, 1))
-        term = k == H
-        wpos = act * np.where(term, math.sqrt(s.w_pair_terminal_pos), math.sqrt(s.w_pair_stage_pos)) \
-            + conn * math.sqrt(s.w_coupled_pos)
-        wang = act * np.where(term, math.sqrt(s.w_pair_terminal_angle), math.sqrt(s.w_pair_stage_angle)) \
-            + conn * math.sqrt(s.w_coupled_angle)
+        slot = self.ps_slot
+        act, conn = d.act[slot], d.conn[slot]
+        a, b = d.pt_i[slot], d.pt_j[slot]
+        wpos = act * self._w_pair_pos + conn * math.sqrt(s.w_coupled_pos)
+        wang = act * self._w_pair_angle + conn * math.sqrt(s.w_coupled_angle)
         wlat = act * math.sqrt(s.w_pair_lateral)
         ci, si = np.cos(xi[:, 2]), np.sin(xi[:, 2])
         cj, sj = np.cos(xj[:, 2]), np.sin(xj[:, 2])
-        dai = np.stack([-si * a[:, 0] - ci * a[:, 1], ci * a[:, 0] - si * a[:, 1]], 1)    # dC_i / dtheta_i
-        dbj = np.stack([-sj * b[:, 0] - cj * b[:, 1], cj * b[:, 0] - sj * b[:, 1]], 1)
-        dp = np.stack([xi[:, 0] + ci * a[:, 0] - si * a[:, 1] - xj[:, 0] - cj * b[:, 0] + sj * b[:, 1],
-                       xi[:, 1] + si * a[:, 0] + ci * a[:, 1] - xj[:, 1] - sj * b[:, 0] - cj * b[:, 1]], 1)
+        dpx = xi[:, 0] + ci * a[:, 0] - si * a[:, 1] - xj[:, 0] - cj * b[:, 0] + sj * b[:, 1]
+        dpy = xi[:, 1] + si * a[:, 0] + ci * a[:, 1] - xj[:, 1] - sj * b[:, 0] - cj * b[:, 1]
         t = np.tan((xi[:, 2] + a[:, 2] - xj[:, 2] - b[:, 2] - math.pi) / 2)
-        lat_i = -si * dp[:, 0] + ci * dp[:, 1]
-        lat_j = -sj * dp[:, 0] + cj * dp[:, 1]
-        r = np.stack([wpos * dp[:, 0], wpos * dp[:, 1], wang * t, wlat * lat_i, wlat * lat_j], 1)
+        lat_i = -si * dpx + ci * dpy
+        lat_j = -sj * dpx + cj * dpy
+        r = _columns(wpos * dpx, wpos * dpy, wang * t, wlat * lat_i, wlat * lat_j)
         J = None
         if jacobians:
             Jdp = np.zeros((H * P, 2, _PS_VARS))         # d dp / d (xi, xj)
             Jdp[:, 0, 0] = Jdp[:, 1, 1] = 1.0
             Jdp[:, 0, 3] = Jdp[:, 1, 4] = -1.0
-            Jdp[:, :, 2] = dai
-            Jdp[:, :, 5] = -dbj
+            Jdp[:, 0, 2], Jdp[:, 1, 2] = -si * a[:, 0] - ci * a[:, 1], ci * a[:, 0] - si * a[:, 1]    # dC_i / dtheta_i
+            Jdp[:, 0, 5], Jdp[:, 1, 5] = -(-sj * b[:, 0] - cj * b[:, 1]), -(cj * b[:, 0] - sj * b[:, 1])
             J = np.zeros((H * P, 5, _PS_VARS))
             J[:, 0:2] = wpos[:, None, None] * Jdp
             dt = 0.5 * (1 + t * t) * wang
             J[:, 2, 2], J[:, 2, 5] = dt, -dt
             J[:, 3] = -si[:, None] * Jdp[:, 0] + ci[:, None] * Jdp[:, 1]
-            J[:, 3, 2] += -ci * dp[:, 0] - si * dp[:, 1]
+            J[:, 3, 2] += -ci * dpx - si * dpy
             J[:, 4] = -sj[:, None] * Jdp[:, 0] + cj[:, None] * Jdp[:, 1]
-            J[:, 4, 5] += -cj * dp[:, 0] - sj * dp[:, 1]
+            J[:, 4, 5] += -cj * dpx - sj * dpy
             J[:, 3:5] *= wlat[:, None, None]
-        st, tm = self.ps_stage, self.ps_term
-        return [(r[st], None if J is None else J[st]), (r[tm][:, :3], None if J is None else J[tm][:, :3])]
-
-    def _block_vars(self):
-        out = [self.v0_idx, self.rs_idx]
-        if len(self.pairs):
-            out += [self.ps_idx[self.ps_stage], self.ps_idx[self.ps_term]]
-        return out
+        ns = self._n_ps_stage
+        return [(r[:ns], None if J is None else J[:ns]), (r[ns:, :3], None if J is None else J[ns:, :3])]
 
     def cost(self, z, d):
         """Nonlinear cost of z (sum of squared residuals + the slacks' linear penalties)."""
@@ -469,18 +548,19 @@ class QPStructure:
         """(P data, q, A data, b) of the QP linearised at zbar, in the solver's order (``vorder``, ``rorder``;
         CSC data of P's upper triangle and of A): the solution is ``from_solver(z)``."""
         nz = self.lay.nz
+        X, U = self.states(zbar, d.x0)
         pvals, q = [], np.zeros(nz)
-        for (r, J), V, (a, b) in zip(self.residuals(zbar, d), self._block_vars(), self._p_maps):
+        for (r, J), V, terms in zip(self._residuals(X, U, d, True), self._block_V, self._p_maps):
             if r.shape[0] == 0:
                 pvals.append(np.zeros(0))
                 continue
-            pvals.append((2.0 * np.matmul(J.transpose(0, 2, 1), J)[:, a, b]).ravel())
+            pvals.append((2.0 * _jtj(J, terms)).ravel())
             t = r - _matvec(J, zbar[V])
             q += np.bincount(V.ravel(), (2.0 * np.matmul(t[:, None, :], J)[:, 0, :]).ravel(), nz)
         pvals.append(self.reg)
         Px = np.bincount(self.p_inv, np.concatenate(pvals), self.nP)
         q += self.lin
-        avals, bvals = self._rows(zbar, d)
+        avals, bvals = self._rows(X, U, d, zbar)
         return Px, q[self.vorder], avals[self.a_perm], bvals[self.rorder]
 
     def bounded(self, Ax, b):
@@ -501,57 +581,23 @@ class QPStructure:
         """Variables in the layout's order from the solver's."""
         return np.asarray(zs, float)[self.vpos]
 
-    def _rows(self, zbar, d):
-        """A entries (in row-block COO order) and b of the linearised rows."""
-        s, st, L = self.settings, self.st, self.lay
-        n, H, Hc = st.n, st.horizon, st.constraint_horizon
-        X, U = self.states(zbar, d.x0)
-        dt = s.dt
-        vals, bs = [], []
-        # dynamics: eq = x_{k+1} - f(x_k, u_k); A = J, b = J zbar - eq
-        th, v, w = X[:-1, :, 2], X[:-1, :, 3], X[:-1, :, 4]
-        c, sn = np.cos(th), np.sin(th)
-        f = np.stack([X[:-1, :, 0] + dt * v * c, X[:-1, :, 1] + dt * v * sn, th + dt * w,
-                      v + dt * U[:, :, 0], w + dt * U[:, :, 1]], axis=2)           # (H, n, 5)
-        eqv = X[1:] - f
-        # k = 0: [x1 (5) | v0, w0 | dv0, dw0]
-        c0, s0 = c[0], sn[0]
-        J0 = np.zeros((n, 5, 9))
-        J0[:, np.arange(5), np.arange(5)] = 1.0
-        J0[:, 0, 5], J0[:, 1, 5], J0[:, 3, 5] = -dt * c0, -dt * s0, -1.0
-        J0[:, 2, 6], J0[:, 4, 6] = -dt, -1.0
-        J0[:, 3, 7], J0[:, 4, 8] = -dt, -dt
-        z0 = np.concatenate([X[1], X[0, :, 3:5], U[0]], axis=1)
-        vals.append(J0[:, self._pat("dyn0")])
-        bs.append(_matvec(J0, z0) - eqv[0])
-        if H > 1:
-            ck, sk, vk = c[1:].reshape(-1), sn[1:].reshape(-1), v[1:].reshape(-1)
-            B = (H - 1) * n
-            Jk = np.zeros((B, 5, 12))
-            Jk[:, np.arange(5), np.arange(5)] = 1.0
-            Jk[:, np.arange(5), 5 + np.arange(5)] = -1.0
-            Jk[:, 0, 7], Jk[:, 0, 8] = dt * vk * sk, -dt * ck
-            Jk[:, 1, 7], Jk[:, 1, 8] = -dt * vk * ck, -dt * sk
-            Jk[:, 2, 9] = -dt
-            Jk[:, 3, 10] = Jk[:, 4, 11] = -dt
-            zk = np.concatenate([X[2:], X[1:-1], U[1:]], axis=2).reshape(B, 12)
-            vals.append(Jk[:, self._pat("dynk")])
-            bs.append(_matvec(Jk, zk) - eqv[1:].reshape(B, 5))
+    def _rows(self, X, U, d, zbar):
+        """A entries (in row-block COO order) and b of the linearised rows at zbar (states X, inputs U)."""
+        s = self.settings
+        vals, bs = self._dynamics_rows(X, U, zbar)
         # the command's rate limit: |vw_0 - previous command| <= lim dt
         for cc in self.rate:
-            lim = (s.dv_max, s.dw_max)[cc] * dt
+            lim = (s.dv_max, s.dw_max)[cc] * s.dt
             prev = d.x0[:, 3 + cc]
-            vals.append(np.tile([1.0, -1.0], (n, 1)))
-            bs.append(np.stack([lim + prev, lim - prev], 1))
+            vals.append(self._rate_vals)
+            bs.append(_columns(lim + prev, lim - prev))
         if s.butterfly:
-            ratio = s.w_max / s.v_max
-            sg = -ratio * d.bsign.T.reshape(-1)                 # rows (k, i)
-            one = np.ones_like(sg)
-            vals.append(np.stack([np.stack([sg, one, -one], 1), np.stack([sg, -one, -one], 1)], 1).reshape(-1, 6))
-            bs.append(np.full((len(sg), 2), s.w_free))
-        P = len(self.pairs)
-        if P and Hc:
-            Ap, bp = self._pip_rows(X, d, zbar)
+            bf = self._bf_vals.copy()
+            bf[:, 0] = bf[:, 3] = -(s.w_max / s.v_max) * d.bsign.T.reshape(-1)      # rows (k, i)
+            vals.append(bf)
+            bs.append(self._bf_b)
+        if len(self.pairs) and self.st.constraint_horizon:
+            Ap, bp = self._pip_rows(d, zbar)
             vals.append(Ap)
             bs.append(bp)
         vals.append(self._ub_vals)
@@ -559,52 +605,66 @@ class QPStructure:
         bs.append(self.b_bounds)
         return np.concatenate([v.ravel() for v in vals]), np.concatenate([b.ravel() for b in bs])
 
-    def _pat(self, name):
-        for nm, _, pat, _ in self._row_blocks:
-            if nm == name:
-                return pat
-        raise KeyError(name)
+    def _dynamics_rows(self, X, U, zbar):
+        """Lists of A entries and b of the dynamics rows: eq = x_{k+1} - f(x_k, u_k); A = J, b = J zbar - eq."""
+        n, H, dt = self.st.n, self.st.horizon, self.settings.dt
+        th, v, w = X[:-1, :, 2], X[:-1, :, 3], X[:-1, :, 4]
+        c, sn = np.cos(th), np.sin(th)
+        f = np.empty((H, n, 5))
+        f[:, :, 0] = X[:-1, :, 0] + dt * v * c
+        f[:, :, 1] = X[:-1, :, 1] + dt * v * sn
+        f[:, :, 2] = th + dt * w
+        f[:, :, 3] = v + dt * U[:, :, 0]
+        f[:, :, 4] = w + dt * U[:, :, 1]
+        eqv = X[1:] - f
+        # k = 0: [x1 (5) | v0, w0 | dv0, dw0]
+        V0, pat0 = self._blocks["dyn0"]
+        J0 = self._J0.copy()
+        J0[:, 0, 5], J0[:, 1, 5] = -dt * c[0], -dt * sn[0]
+        vals, bs = [J0[:, pat0]], [_matvec(J0, zbar[V0]) - eqv[0]]
+        if H > 1:
+            Vk, patk = self._blocks["dynk"]
+            ck, sk, vk = c[1:].reshape(-1), sn[1:].reshape(-1), v[1:].reshape(-1)
+            Jk = self._Jk.copy()
+            Jk[:, 0, 7], Jk[:, 0, 8] = dt * vk * sk, -dt * ck
+            Jk[:, 1, 7], Jk[:, 1, 8] = -dt * vk * ck, -dt * sk
+            vals.append(Jk[:, patk])
+            bs.append(_matvec(Jk, zbar[Vk]) - eqv[1:].reshape(-1, 5))
+        return vals, bs
 
-    def _pip_rows(self, X, d, zbar):
-        st, L = self.st, self.lay
-        Hc, P = st.constraint_horizon, len(self.pairs)
-        ks = np.arange(1, Hc + 1)
-        xi = X[ks][:, self.pairs[:, 0], :3].reshape(Hc * P, 3)
-        xj = X[ks][:, self.pairs[:, 1], :3].reshape(Hc * P, 3)
-        conn = np.tile(d.conn, Hc)
-        head = np.tile(d.head, (Hc, 1))
-        G = np.tile(d.poly_g, (Hc, 1, 1))                       # (B, 4, 2)
-        hh = np.tile(d.poly_h, (Hc, 1))
+    def _pip_rows(self, d, zbar):
+        """A entries and b of the coupling rows (head in the polygon, relative heading within its limit) of
+        the pair stages k = 1..Hc, rows (k, q); zero rows for a slot that is not coupled."""
+        Vp, patp = self._blocks["pip"]
+        zb = zbar[Vp]                                            # (B, 7): pose of i, pose of j, slack
+        xi, xj, sl = zb[:, :3], zb[:, 3:6], zb[:, 6]
+        slot = self.pip_slot
+        conn, head, G, hh = d.conn[slot], d.head[slot], d.poly_g[slot], d.poly_h[slot]
         ci, si = np.cos(xi[:, 2]), np.sin(xi[:, 2])
         cj, sj = np.cos(xj[:, 2]), np.sin(xj[:, 2])
         wx = xi[:, 0] + ci * head[:, 0] - si * head[:, 1] - xj[:, 0]
         wy = xi[:, 1] + si * head[:, 0] + ci * head[:, 1] - xj[:, 1]
         qx, qy = cj * wx + sj * wy, -sj * wx + cj * wy
         dhx, dhy = -si * head[:, 0] - ci * head[:, 1], ci * head[:, 0] - si * head[:, 1]
-        Jq = np.zeros((Hc * P, 2, 6))
+        Jq = np.zeros((len(slot), 2, 6))
         Jq[:, 0, 0], Jq[:, 1, 0] = cj, -sj
         Jq[:, 0, 1], Jq[:, 1, 1] = sj, cj
         Jq[:, 0, 2], Jq[:, 1, 2] = cj * dhx + sj * dhy, -sj * dhx + cj * dhy
         Jq[:, :, 3:5] = -Jq[:, :, 0:2]
         Jq[:, 0, 5], Jq[:, 1, 5] = -sj * wx + cj * wy, -cj * wx - sj * wy
-        Jg = conn[:, None, None] * np.matmul(G, Jq)             # (B, 4, 6)
-        g = conn[:, None] * (G[:, :, 0] * qx[:, None] + G[:, :, 1] * qy[:, None] - hh)
+        A = self._A_pip.copy()
+        A[:, :POLY_ROWS, :6] = conn[:, None, None] * np.matmul(G, Jq)
         ys = YAW_ROW_SCALE * conn
-        yaw_lim, yaw_off = np.tile(d.yaw_lim, Hc), np.tile(d.yaw_off, Hc)
-        pti, ptj = np.tile(d.pt_i[:, 2], Hc), np.tile(d.pt_j[:, 2], Hc)
-        dth = xi[:, 2] + pti - xj[:, 2] - ptj - math.pi - yaw_off
-        B = Hc * P
-        A = np.zeros((B, POLY_ROWS + 2, 7))
-        A[:, :POLY_ROWS, :6] = Jg
+        dth = xi[:, 2] + d.pt_i[slot, 2] - xj[:, 2] - d.pt_j[slot, 2] - math.pi - d.yaw_off[slot]
+        yaw_lim = d.yaw_lim[slot]
         A[:, POLY_ROWS, 2], A[:, POLY_ROWS, 5] = ys, -ys
         A[:, POLY_ROWS + 1, 2], A[:, POLY_ROWS + 1, 5] = -ys, ys
-        A[:, :, 6] = -1.0
-        gv = np.concatenate([g, np.stack([ys * (dth - yaw_lim), ys * (-dth - yaw_lim)], 1)], axis=1)
-        sl = zbar[L.sp_idx[ks].reshape(-1)]
-        gv = gv - sl[:, None]
-        zb = np.concatenate([xi, xj, sl[:, None]], axis=1)
-        b = _matvec(A, zb) - gv
-        return A[:, self._pat("pip")], b
+        gv = np.empty((len(slot), POLY_ROWS + 2))
+        gv[:, :POLY_ROWS] = conn[:, None] * (G[:, :, 0] * qx[:, None] + G[:, :, 1] * qy[:, None] - hh)
+        gv[:, POLY_ROWS] = ys * (dth - yaw_lim)
+        gv[:, POLY_ROWS + 1] = ys * (-dth - yaw_lim)
+        b = _matvec(A, zb) - (gv - sl[:, None])
+        return A[:, patp], b
 
     def matrices(self, Px, Ax):
         """scipy CSC matrices (P upper, A) of the data arrays, in the solver's order."""
