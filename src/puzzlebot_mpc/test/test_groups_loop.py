@@ -2,6 +2,7 @@
 in parallel, then assembly_to_goal leads each line to its own goal; bad requests."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -140,3 +141,11 @@ def test_a_lost_pair_fails_the_drive():
     plant = Plant(loop, STARTS)
     status, _ = plant.run(BehaviorRequest("assembly_to_goal", ["pz1"], goals=[(0.3, 0.0)], timeout=5.0), 6.0)
     assert status.state == FAILED and "lost" in status.message
+
+
+def test_a_lead_that_passes_its_goal_fails_at_once():
+    loop = ControlLoop(["pz1"], replace(KINEMATIC, assembly_turn_rate=1e-6))   # a lead that cannot turn
+    plant = Plant(loop, {"pz1": (0.0, 0.0, 0.0)})
+    status, elapsed = plant.run(BehaviorRequest("assembly_to_goal", ["pz1"], goals=[(0.1, 0.03)], tolerance=0.01,
+                                                timeout=30.0), 31.0)
+    assert status.state == FAILED and "passed the goal: pz1" in status.message and elapsed < 10.0

@@ -16,8 +16,10 @@ drive_assembly). Robots outside the led assemblies hold still.
 
 Succeeds when every lead is within ``tolerance`` (default the setting
 ``goal_tolerance``) of its goal; fails if a coupled pair of a led assembly
-is lost on the way, or after ``timeout`` s (0: none), naming the leads not
-there. Status errors and progress: as go_to_goal, per lead.
+is lost on the way, or once a lead has passed its goal (beyond the goal
+on its segment by more than ``tolerance``, still outside it: an assembly
+that did not turn enough does not drive on), or after ``timeout`` s (0:
+none), naming the leads not there. Status errors and progress: as go_to_goal, per lead.
 """
 
 import math
@@ -75,7 +77,25 @@ class AssemblyToGoal(GoToGoal):
         if member_lost:
             return Progress(FAILED, "pair(s) lost while driving: %s"
                             % ", ".join("%s-%s" % p.robots for p in member_lost))
+        passed = [self.passed(lead, origin, goal, poses.get(lead))
+                  for lead, origin, goal in zip(self.leads, self.origins, self.goals)]
+        if any(passed):
+            return Progress(FAILED, "passed the goal: %s (an assembly turns only as its couplings allow)"
+                            % ", ".join(p for p in passed if p), self.errors(poses))
         return super().status(now, poses, newly, lost, elapsed)
+
+    def passed(self, lead, origin, goal, pose):
+        """'pz1 62 mm to the side' when ``lead`` at ``pose`` is beyond ``goal`` on its segment from
+        ``origin`` by more than the tolerance and not within it; else ''."""
+        if pose is None:
+            return ""
+        tol, d = self.tolerance(), np.asarray(goal) - origin
+        length = float(np.linalg.norm(d))
+        if length < 1e-9:
+            return ""
+        along = float(np.dot(np.asarray(pose[:2]) - origin, d)) / length
+        dist = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        return "%s %.0f mm off" % (lead, 1e3 * dist) if along > length + tol and dist > tol else ""
 
     def timed_out(self, now, poses, errors, elapsed):
         tol = self.tolerance()
