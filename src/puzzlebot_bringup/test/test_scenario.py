@@ -123,3 +123,36 @@ def test_a_target_the_robots_cannot_form_is_an_error_at_load():
             {"behavior": "couple", "target": "line3", "robots": ["pz1", "pz2"]}]}, three)
     ok = parse_scenario({"name": "x", "start": {}, "steps": [{"behavior": "couple", "target": "line3"}]}, three)
     assert ok.steps[0].target == "line3"
+
+
+FOUR = ["pz1", "pz2", "pz3", "pz4"]
+
+
+def test_couple_groups_and_assembly_to_goal_parse():
+    scenario = parse_scenario({"name": "g", "start": {}, "steps": [
+        {"behavior": "couple", "groups": [["pz1", "pz2"], ["pz3", "pz4"]], "target": "line", "timeout": 60},
+        {"behavior": "assembly_to_goal", "goals": {"pz1": [0.3, 0.0], "pz3": [0.3, 0.2]}, "tolerance": 0.02}]},
+        FOUR)
+    couple, drive = scenario.steps
+    assert couple.robots == FOUR and couple.groups == [2, 2] and "2 groups of 2" in couple.describe()
+    assert drive.robots == ["pz1", "pz3"] and drive.goals == [(0.3, 0.0), (0.3, 0.2)] and drive.tolerance == 0.02
+    assert drive.describe().startswith("assembly_to_goal pz1->(0.300, 0.000)")
+
+
+@pytest.mark.parametrize("step, fragment", [
+    ({"behavior": "couple", "groups": [["pz1", "pz2"]], "robots": ["pz1", "pz2"], "target": "line"},
+     "either 'robots' or 'groups'"),
+    ({"behavior": "couple", "groups": [["pz1"], ["pz2", "pz3"]], "target": "line"}, "at least two robots"),
+    ({"behavior": "couple", "groups": [["pz1", "pz2"], ["pz2", "pz3"]], "target": "line"}, "more than one group"),
+    ({"behavior": "couple", "groups": [["pz1", "pz9"]], "target": "line"}, "unknown robot 'pz9'"),
+    ({"behavior": "couple", "groups": [], "target": "line"}, "list of robot lists"),
+    ({"behavior": "couple", "groups": [["pz1", "pz2"], ["pz3", "pz4"]], "slots": [[0, 0, 0], [-0.05, 0, 0]]},
+     "not slots"),
+    ({"behavior": "couple", "groups": [["pz1", "pz2", "pz3"]], "target": "grid"}, "even number"),
+    ({"behavior": "assembly_to_goal", "goals": {"pz1": [0.3]}}, "2 finite"),
+    ({"behavior": "assembly_to_goal", "goals": {"pz1": [0.3, 0]}, "velocity": [0.03, 0]}, "do not apply"),
+])
+def test_bad_group_and_goal_steps_name_the_problem(step, fragment):
+    with pytest.raises(ConfigError) as e:
+        parse_scenario({"name": "x", "start": {}, "steps": [step]}, FOUR)
+    assert fragment in str(e.value)

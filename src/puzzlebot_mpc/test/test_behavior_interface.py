@@ -69,11 +69,12 @@ def test_the_registry_is_per_manager():
     assert "spin" not in REGISTRY
     with pytest.raises(BehaviorError) as e:
         spinning_manager().validate(BehaviorRequest("fly"))
-    assert str(e.value).endswith("drive_assembly, spin")
+    assert str(e.value).endswith("drive_assembly, assembly_to_goal, spin")
 
 
 def test_shipped_behaviours_are_registered_under_their_request_names():
-    assert BEHAVIORS == ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly")
+    assert BEHAVIORS == ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly",
+                         "assembly_to_goal")
     assert all(cls.name == name and issubclass(cls, Behavior) for name, cls in REGISTRY.items())
 
 

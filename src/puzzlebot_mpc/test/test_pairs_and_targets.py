@@ -115,6 +115,24 @@ def test_active_pairs_run_in_parallel_without_conflicts():
     assert [book.mover(p) for p in book.active] == ["j", "j"]
 
 
+def test_the_seed_limit_counts_per_target_so_separate_targets_form_at_once():
+    lines = [["a1", "a2", "a3", "a4"], ["b1", "b2", "b3", "b4"], ["c1", "c2", "c3"]]
+    goals = [pr.make_pair(x, y, pr.ANCHOR, GEO) for line in lines for x, y in zip(line[:-1], line[1:])]
+    poses = {n: (0.0, 0.0, 0.0) for line in lines for n in line}
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1)
+    book.set_goals(goals)
+    # one seed per line, in each line's middle
+    assert sorted(p.key for p in book.assign_active(poses)) == [("a2", "a3"), ("b2", "b3"), ("c1", "c2")]
+    book.add_coupled(goals[1])                                  # a2-a3 formed: line a grows, no second seed
+    book.goals.remove(goals[1])
+    book.active = []
+    keys = sorted(p.key for p in book.assign_active(poses))
+    assert ("a1", "a2") in keys and ("a3", "a4") in keys and ("b2", "b3") in keys
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1)            # one target: still one seed at a time
+    book.set_goals(goals[:3])
+    assert [p.key for p in book.assign_active(poses)] == [("a2", "a3")]
+
+
 def test_single_robots_grow_assemblies_first_and_an_assembly_takes_several_at_once():
     names = ["r1", "r2", "r3", "r4", "r5"]
     chain = [pr.make_pair(a, b, pr.ANCHOR, GEO) for a, b in zip(names[:-1], names[1:])]

@@ -52,7 +52,8 @@ def pairs_text(msg):
 def step_goal(step, cls=BehaviorGoal):
     """The request of a scenario Step: a BehaviorGoal (or ``cls``: SetBehaviorRequest has the same fields)."""
     req = cls(behavior=step.behavior, robots=step.robots, tolerance=step.tolerance,
-              timeout=step.timeout, target=step.target, pair=step.pair, distance=step.distance)
+              timeout=step.timeout, target=step.target, pair=step.pair, distance=step.distance,
+              groups=step.groups)
     req.slots = [Pose2D(x=sl[0], y=sl[1], theta=sl[2]) for sl in step.slots]
     req.goals = [Point(x=g[0], y=g[1], z=0.0) for g in step.goals]
     req.velocities = [twist(v, w) for v, w in step.velocities]
@@ -248,7 +249,7 @@ class Runner:
             if pose is not None:
                 errors[name] = math.hypot(pose[0] - goal[0], pose[1] - goal[1])
         pairs = ""
-        if step.behavior in ("couple", "decouple", "drive_assembly"):
+        if step.behavior in ("couple", "decouple", "drive_assembly", "assembly_to_goal"):
             pairs = pairs_text(self.pairs_at(end))
             physical = self.physical_at(end)
             if physical is not None:      # simulation: the anchors themselves

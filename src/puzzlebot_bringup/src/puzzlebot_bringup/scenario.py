@@ -32,6 +32,14 @@ robot list and the scenario::
           target: line                     # line, row, a name from puzzlebot_mpc/config/targets.yaml ...
           slots: [[0, 0, 0], [-0.05, 0, 0]]  # ... or explicit slots [x, y, heading] (m, m, rad)
           timeout: 120.0
+        - behavior: couple                 # several assemblies at once: each group forms its own target
+          groups: [[pz1, pz2], [pz3, pz4]] # (instead of robots)
+          target: line
+          timeout: 120.0
+        - behavior: assembly_to_goal       # each named robot leads its assembly to its goal
+          goals: {pz1: [x, y], pz3: [x, y]}  # m, world frame; one robot per assembly
+          tolerance: 0.02                  # m (optional)
+          timeout: 60.0
         - behavior: drive_assembly         # the assembly of the first robot drives as one body
           robots: [pz1]
           velocity: [0.03, 0.0]            # m/s, rad/s in pz1's frame
@@ -61,11 +69,12 @@ SCATTER_KEYS = {"rows", "spacing", "lateral", "yaw", "row_spacing", "origin", "h
 SCATTER_SEED_TAG = 0x5CA77E2      # mixed into the run's seed for the scatter's random numbers
 SCATTER_REDRAWS = 200             # draws tried before a scatter that keeps overlapping is an error
 STEP_KEYS = {"behavior", "goals", "velocities", "tolerance", "timeout", "robots", "target", "slots", "pair",
-             "velocity", "distance"}
-BEHAVIORS = ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly")
+             "velocity", "distance", "groups"}
+BEHAVIORS = ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly", "assembly_to_goal")
 _KEYS_OF = {"go_to_goal": {"goals", "tolerance", "timeout"}, "follow_velocity": {"velocities", "timeout"},
-            "stop": {"timeout"}, "couple": {"robots", "target", "slots", "timeout"},
-            "decouple": {"pair", "timeout"}, "drive_assembly": {"robots", "velocity", "distance", "timeout"}}
+            "stop": {"timeout"}, "couple": {"robots", "groups", "target", "slots", "timeout"},
+            "decouple": {"pair", "timeout"}, "drive_assembly": {"robots", "velocity", "distance", "timeout"},
+            "assembly_to_goal": {"goals", "tolerance", "timeout"}}
 
 
 @dataclass
@@ -80,14 +89,18 @@ class Step:
     slots: List[Tuple[float, float, float]] = field(default_factory=list)
     pair: List[str] = field(default_factory=list)
     distance: float = 0.0
+    groups: List[int] = field(default_factory=list)   # couple: robots per group (consecutive in robots)
 
     def describe(self):
-        if self.behavior == "go_to_goal":
-            return "go_to_goal " + ", ".join("%s->(%.3f, %.3f)" % (r, g[0], g[1])
+        if self.behavior in ("go_to_goal", "assembly_to_goal"):
+            return self.behavior + " " + ", ".join("%s->(%.3f, %.3f)" % (r, g[0], g[1])
                                              for r, g in zip(self.robots, self.goals))
         if self.behavior == "follow_velocity":
             return "follow_velocity %.1f s " % self.timeout + ", ".join(
                 "%s (%.3f m/s, %.2f rad/s)" % (r, v[0], v[1]) for r, v in zip(self.robots, self.velocities))
+        if self.behavior == "couple" and self.groups:
+            return "couple %d groups of %s robots, each into %s" % (
+                len(self.groups), "/".join(str(k) for k in sorted(set(self.groups))), self.target)
         if self.behavior == "couple":
             return "couple %s into %s" % (", ".join(self.robots) or "all robots",
                                           self.target or "%d slots" % len(self.slots))
@@ -151,6 +164,26 @@ def _names(value, where, robots, allow_empty=False):
         if name not in robots:
             raise ConfigError("%s: unknown robot %r; robots: %s" % (where, name, ", ".join(robots)))
     return list(value)
+
+
+def _groups(step, where, robots):
+    """A couple step's ``groups`` (lists of robot names, each of at least two, no robot twice): the robots
+    in order and the group sizes."""
+    groups = step["groups"]
+    if "robots" in step:
+        raise ConfigError("%s: give either 'robots' or 'groups', not both" % where)
+    if not isinstance(groups, list) or not groups:
+        raise ConfigError("%s.groups: expected a list of robot lists, got %r" % (where, groups))
+    names = []
+    for k, g in enumerate(groups):
+        group = _names(g, "%s.groups[%d]" % (where, k), robots)
+        if len(group) < 2:
+            raise ConfigError("%s.groups[%d]: a group needs at least two robots, got %r" % (where, k, g))
+        names += group
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError("%s.groups: robot(s) %s in more than one group" % (where, ", ".join(twice)))
+    return names, [len(g) for g in groups]
 
 
 def _number(spec, key, where, default=None, minimum=0.0):
@@ -274,7 +307,7 @@ def parse_scenario(data, robots, where="scenario"):
                     or value < 0:
                 raise ConfigError("%s.%s: expected a number >= 0, got %r" % (w, key, value))
             setattr(step, key, float(value))
-        if behavior == "go_to_goal":
+        if behavior in ("go_to_goal", "assembly_to_goal"):
             step.robots, step.goals = _pairs(s.get("goals"), w + ".goals", robots, 2)
         elif behavior == "follow_velocity":
             step.robots, step.velocities = _pairs(s.get("velocities"), w + ".velocities", robots, 2)
@@ -282,13 +315,18 @@ def parse_scenario(data, robots, where="scenario"):
                 raise ConfigError("%s.timeout: follow_velocity needs a duration > 0" % w)
         elif behavior == "couple":
             step.robots = _names(s.get("robots", []), w + ".robots", robots, allow_empty=True)
+            if "groups" in s:
+                step.robots, step.groups = _groups(s, w, robots)
             step.target = s.get("target", "")
             if not isinstance(step.target, str):
                 raise ConfigError("%s.target: expected a target name, got %r" % (w, step.target))
             step.slots = [tuple(_numbers(sl, 3, "%s.slots[%d]" % (w, k))) for k, sl in enumerate(s.get("slots", []))]
             if bool(step.target) == bool(step.slots):
                 raise ConfigError("%s: couple needs either 'target' or 'slots'" % w)
-            check_target(step, len(step.robots) or len(robots), w)
+            if step.groups and step.slots:
+                raise ConfigError("%s: groups need a target name (each group forms its own copy), not slots" % w)
+            for n in sorted(set(step.groups)) or [len(step.robots) or len(robots)]:
+                check_target(step, n, w)
         elif behavior == "decouple":
             step.pair = _names(s.get("pair"), w + ".pair", robots)
             if len(step.pair) != 2:

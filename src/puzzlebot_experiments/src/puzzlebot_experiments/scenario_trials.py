@@ -47,7 +47,7 @@ def request_of(step):
     """BehaviorRequest of a scenario Step."""
     return BehaviorRequest(step.behavior, list(step.robots), [tuple(g) for g in step.goals],
                            [tuple(v) for v in step.velocities], step.tolerance, step.timeout, step.target,
-                           [tuple(s) for s in step.slots], list(step.pair), step.distance)
+                           [tuple(s) for s in step.slots], list(step.pair), step.distance, list(step.groups))
 
 
 def physical_problems(cl, step, coupled, body_side):

@@ -329,6 +329,31 @@ class CoupledPairs(dict):
         super().update(*args, **kwargs)
 
 
+
+def _hops(edges, start):
+    """{robot: hops from the nearest of ``start``} over the graph ``edges`` ({robot: neighbours}): the
+    robots reachable from ``start``."""
+    dist, frontier = {r: 0 for r in start}, list(start)
+    while frontier:
+        nxt = []
+        for r in frontier:
+            for n in edges.get(r, ()):
+                if n not in dist:
+                    dist[n] = dist[r] + 1
+                    nxt.append(n)
+        frontier = nxt
+    return dist
+
+
+def _components(edges):
+    """{robot: a name for its connected component} of the graph ``edges`` (its first robot by name)."""
+    out = {}
+    for r in sorted(edges):
+        if r not in out:
+            for m in _hops(edges, [r]):
+                out[m] = r
+    return out
+
 @dataclass
 class PairBook:
     """Goal, active and coupled pairs of the stack (Algorithm 3's lists).
@@ -351,7 +376,7 @@ class PairBook:
     docking: Dict[Tuple[str, str], Docking] = field(default_factory=dict)   # goal pair -> its manoeuvre
     monitors: Dict[Tuple[str, str], SeatMonitor] = field(default_factory=dict)  # coupled pair -> its watch
     repair: bool = False                 # re-seat coupled pairs found open (a couple behaviour runs)
-    max_seeds: int = 0                   # sub-assemblies that may form at once (0: no limit)
+    max_seeds: int = 0                   # sub-assemblies that may form at once per target (0: no limit)
     reseats: int = 0                     # pairs sent back to be re-seated so far
 
     @classmethod
@@ -418,9 +443,10 @@ class PairBook:
         once. Sub-assemblies therefore form in parallel (seeds of two single
         robots), single robots join them (grow), and assemblies join each
         other, the smaller one moving. At most ``max_seeds`` sub-assemblies
-        exist or form at once (0: no limit); a seed then starts where the
-        target's graph has its middle, so the assembly grows outwards at both
-        ends. Pairs already being aligned keep their place (switching partners
+        exist or form at once in each target (a connected part of the graph of
+        coupled and goal pairs; a couple with groups forms several targets at
+        once; 0: no limit); a seed then starts where its target's graph has its
+        middle, so the assembly grows outwards at both ends. Pairs already being aligned keep their place (switching partners
         mid-way wastes the approach), pairs whose manoeuvre is under way (a
         pair being re-seated) first; the rest are taken in priority order,
         growing first, then seeding, then joining.
@@ -445,10 +471,14 @@ class PairBook:
 
         keep = [q for q in ranked if (q in self.active or underway(q)) and not set(q.robots) & missing]
         keep.sort(key=lambda q: not underway(q))
-        eccentricity = self._seed_eccentricity() if self.max_seeds else {}
+        graph = self._goal_graph()
+        eccentricity = self._seed_eccentricity(graph) if self.max_seeds else {}
         rest = sorted((q for q in ranked if q not in keep and not set(q.robots) & missing),
                       key=lambda q: (kinds[kind(q)], eccentricity.get(q.key, 0)))
-        assemblies = len({g for g in group_of.values() if len(g) > 1})
+        component = _components(graph)
+        assemblies = {}                   # target component -> sub-assemblies in it (formed or forming)
+        for g in {g for g in group_of.values() if len(g) > 1}:
+            assemblies[component[g[0]]] = assemblies.get(component[g[0]], 0) + 1
         used, moving, holding, chosen = set(), set(), set(), []
         for q in keep + rest:
             if q.robot_i in used or q.robot_j in used:
@@ -461,10 +491,11 @@ class PairBook:
                 continue
             if any(g in moving for g in hg):
                 continue
-            if q not in keep and kind(q) == "seed" and self.max_seeds and assemblies >= self.max_seeds:
+            c = component[q.robot_i]
+            if q not in keep and kind(q) == "seed" and self.max_seeds and assemblies.get(c, 0) >= self.max_seeds:
                 continue
             if kind(q) == "seed":
-                assemblies += 1
+                assemblies[c] = assemblies.get(c, 0) + 1
             chosen.append(q)
             if q not in self.active and q.key in self.docking:
                 self.docking[q.key].since = None     # its turn now: the phase's clock starts at the next update
@@ -476,26 +507,20 @@ class PairBook:
         self.active = chosen
         return self.active
 
-    def _seed_eccentricity(self):
-        """{goal pair key: hops from the pair to the farthest robot of the goal graph}: a seed with a small
-        one sits in the middle of the target, and the assembly grows outwards at several places at once."""
+    def _goal_graph(self):
+        """{robot: set of neighbours} over the coupled and the goal pairs: the targets being formed (one
+        connected component per target; a couple request with groups has several)."""
         edges = {}
         for q in list(self.coupled.values()) + self.goals:
             edges.setdefault(q.robot_i, set()).add(q.robot_j)
             edges.setdefault(q.robot_j, set()).add(q.robot_i)
-        out = {}
-        for q in self.goals:
-            dist, frontier = {r: 0 for r in q.robots}, list(q.robots)
-            while frontier:
-                nxt = []
-                for r in frontier:
-                    for n in edges.get(r, ()):
-                        if n not in dist:
-                            dist[n] = dist[r] + 1
-                            nxt.append(n)
-                frontier = nxt
-            out[q.key] = max(dist.values())
-        return out
+        return edges
+
+    def _seed_eccentricity(self, edges):
+        """{goal pair key: hops from the pair to the farthest robot of its component of the goal graph
+        ``edges``}: a seed with a small one sits in the middle of its target, and the assembly grows
+        outwards at several places at once."""
+        return {q.key: max(_hops(edges, q.robots).values()) for q in self.goals}
 
     def groups(self):
         """{robot: its assembly as a sorted tuple of names} over the coupled pairs (single robots: (name,)),

@@ -62,7 +62,9 @@ class MPCSettings:
     max_iter: int = 100              # solver iteration cap per QP / NLP
     qp_tolerance: float = 1.0e-6     # Clarabel's gap and feasibility tolerances
     command_zero: float = 1.0e-5     # m/s, rad/s: smaller commands are sent as exact zeros (solver noise)
-    goal_tolerance: float = 0.005    # m: default success radius of go_to_goal
+    goal_tolerance: float = 0.005    # m: default success radius of go_to_goal (and assembly_to_goal)
+    assembly_speed: float = 0.03     # m/s: cruise speed of an assembly led to a goal (assembly_to_goal)
+    assembly_turn_rate: float = 0.15  # rad/s: its lead's largest turn rate (a chain turns like a train)
     pose_timeout: float = 0.5        # s: a pose older than this is stale; the robot is stopped
     approach_lookahead: float = 0.04      # m: the approach target leads the opening robot by this along the axis
     approach_standoff_max: float = 0.03   # m: largest standoff of a misaligned anchor pair's approach target
@@ -101,7 +103,8 @@ class MPCSettings:
     decouple_settle_speed: float = 0.01  # m/s: after the release both robots push back into their assemblies ...
     decouple_settle_time: float = 1.5    # s: ... for this long (re-seats the neighbours' anchors the wiggle bent)
     decouple_confirm_steps: int = 3  # consecutive control steps the release must be seen
-    assembly_seeds: int = 1          # sub-assemblies a couple forms at once (0: every seed that can go; pairs.PairBook)
+    assembly_seeds: int = 1          # sub-assemblies a couple forms at once in each target (0: every seed
+                                     # that can go; pairs.PairBook)
     # docking an anchor pair and proving it seated (puzzlebot_mpc/docking.py; dock_* = DockingSettings fields)
     docking: bool = True             # false: Algorithm 2 alone decides that a pair is coupled (the paper)
     dock_push_speed: float = _DOCK.push_speed     # m/s: the mover drives straight into its partner
@@ -155,7 +158,7 @@ class MPCSettings:
     def check(self, where="mpc"):
         """Range and cross-field checks; raise ConfigError."""
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
-                                "dw_max", "max_iter", "goal_tolerance", "pose_timeout", "sqp_iterations",
+                                "dw_max", "max_iter", "goal_tolerance", "assembly_speed", "assembly_turn_rate", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "solver_threads", "active_set_iterations", "pair_epsilon",
                                 "pair_lost_margin",
                                 "wiggle_period",

@@ -250,6 +250,25 @@ def assign(target, robots, poses, geometry, heading_weight=1.0):
                       place(target.slots, centre[0], centre[1], heading), target.name)
 
 
+def merge_assignments(assignments):
+    """One Assignment of several independent ones (a couple request with groups: each group forms its own
+    copy of the target): the robots, goal pairs, priorities and MST edges side by side, the slots
+    numbered on from group to group; ``placement`` is the first group's, ``cost`` the sum."""
+    if len(assignments) == 1:
+        return assignments[0]
+    robots, slot_of, pairs, priority, edges, slots = [], {}, [], {}, [], []
+    for a in assignments:
+        offset = len(robots)
+        robots += a.robots
+        slot_of.update({r: offset + s for r, s in a.slot_of.items()})
+        pairs += a.pairs
+        priority.update(a.priority)
+        edges += a.mst_edges
+        slots.append(a.slots_world)
+    return Assignment(robots, slot_of, assignments[0].placement, sum(a.cost for a in assignments), pairs,
+                      priority, edges, np.vstack(slots), assignments[0].target)
+
+
 def brute_force_assignment(cost):
     """Minimum total cost over all permutations (for tests on small cases)."""
     from itertools import permutations

@@ -56,6 +56,8 @@ class BehaviorRequest:
     slots: Sequence[Tuple[float, float, float]] = ()  # couple: explicit slots (assembly frame)
     pair: Sequence[str] = ()                       # decouple: the two robots
     distance: float = 0.0                          # drive_assembly: metres to drive (0: for timeout s)
+    groups: Sequence[int] = ()                     # couple: robots per group (consecutive in robots), each
+                                                   # forming its own copy of the target; empty: one group
     # Scheduling (ControlLoop.request): when the behaviour starts.
     queue: bool = False          # start once the running behaviour and those queued before it have ended
                                  # (dropped if one of them fails); False: replace the running one now

@@ -2,8 +2,11 @@
 
 The target is a name (config/targets.yaml, or a generator: ``line``,
 ``row``) or explicit ``slots`` (x [m], y [m], heading [rad] in the assembly
-frame), one per named robot. At the start the goal pairs follow from the
-target and the start poses (targets.assign: MST + Hungarian); every step the
+frame), one per named robot. With ``groups`` (robot counts) the named robots
+are split into consecutive groups of those sizes and every group forms its
+own copy of the named target, where it stands (several assemblies at once;
+each group's assignment is independent). At the start the goal pairs follow
+from the target and the start poses (targets.assign: MST + Hungarian); every step the
 pair book picks every conflict-free pair that can go now (pairs.PairBook.
 assign_active: sub-assemblies form in parallel, single robots join them,
 assemblies join each other) and updates their status (Algorithm 2, and for
@@ -23,7 +26,7 @@ import numpy as np
 from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
-from puzzlebot_mpc.targets import TargetError, assign, resolve_target
+from puzzlebot_mpc.targets import TargetError, assign, merge_assignments, resolve_target
 
 COUPLE = "couple"
 
@@ -39,17 +42,21 @@ class Couple(Behavior):
         req, robots, ctx = self.req, self.robots, self.ctx
         if req.slots and not all(len(sl) == 3 and finite(sl) for sl in req.slots):
             raise BehaviorError("couple: every slot must be a finite (x, y, heading)")
-        try:
-            target = resolve_target(req.target, [tuple(sl) for sl in req.slots], len(robots), ctx.targets,
-                                    ctx.geometry)
-        except TargetError as e:
-            raise BehaviorError("couple: %s" % e)
-        if len(target.slots) > len(robots):
-            raise BehaviorError("couple: target %r has %d slots but only %d robot(s) were given"
-                                % (target.name, len(target.slots), len(robots)))
-        if len(target.slots) < len(robots):
-            raise BehaviorError("couple: target %r has %d slots for %d robots; name the robots to use"
-                                % (target.name, len(target.slots), len(robots)))
+        groups = self.groups()
+        targets = []
+        for group in groups:
+            try:
+                target = resolve_target(req.target, [tuple(sl) for sl in req.slots], len(group), ctx.targets,
+                                        ctx.geometry)
+            except TargetError as e:
+                raise BehaviorError("couple: %s" % e)
+            if len(target.slots) > len(group):
+                raise BehaviorError("couple: target %r has %d slots but only %d robot(s) were given"
+                                    % (target.name, len(target.slots), len(group)))
+            if len(target.slots) < len(group):
+                raise BehaviorError("couple: target %r has %d slots for %d robots; name the robots to use"
+                                    % (target.name, len(target.slots), len(group)))
+            targets.append(target)
         self.need_poses(robots, poses)
         self.assignment = None
         if poses is None:
@@ -60,7 +67,8 @@ class Couple(Behavior):
                 raise BehaviorError("couple: %s is coupled to %s, which is not in the request; decouple it first "
                                     "or include it" % tuple(p.robots if inside[0] else p.robots[::-1]))
         try:
-            assignment = assign(target, robots, np.array([poses[r] for r in robots], float), ctx.geometry)
+            assignment = merge_assignments([assign(t, g, np.array([poses[r] for r in g], float), ctx.geometry)
+                                            for t, g in zip(targets, groups)])
         except TargetError as e:
             raise BehaviorError("couple: %s" % e)
         goal_keys = {p.key for p in assignment.pairs}
@@ -69,6 +77,23 @@ class Couple(Behavior):
                 raise BehaviorError("couple: %s and %s are coupled but the target assignment does not join "
                                     "them that way; decouple them first" % p.robots)
         self.assignment = assignment
+
+    def groups(self):
+        """The named robots split by the request's ``groups`` (counts, in order; none: one group)."""
+        req, robots = self.req, self.robots
+        if not req.groups:
+            return [robots]
+        sizes = list(req.groups)
+        if any(isinstance(k, bool) or int(k) != k or k < 2 for k in sizes) or sum(sizes) != len(robots):
+            raise BehaviorError("couple: groups must be robot counts >= 2 adding up to the %d named robot(s), "
+                                "got %r" % (len(robots), sizes))
+        if req.slots:
+            raise BehaviorError("couple: groups need a target name (each group forms its own copy), not slots")
+        out, k = [], 0
+        for n in sizes:
+            out.append(robots[k:k + int(n)])
+            k += int(n)
+        return out
 
     def start(self, now, poses, static):
         super().start(now, poses, static)

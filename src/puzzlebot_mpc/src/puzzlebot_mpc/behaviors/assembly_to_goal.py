@@ -1,0 +1,148 @@
+"""``assembly_to_goal``: every named robot leads its assembly to its own goal (x, y) [m], world frame.
+
+Each named robot (a *lead*) belongs to a different assembly (a coupled
+line, say, or a single robot); the assemblies drive at once, each as one
+body. A lead follows the straight segment from where it stood at the start
+to its goal by pure pursuit: it steers towards a carrot LOOKAHEAD ahead of
+its projection on the segment (the goal itself at the end), at
+``assembly_speed`` times the cosine of the carrot's bearing (never
+backwards), slowing down inside SLOW_RADIUS of the goal, with its turn rate
+clipped to ``assembly_turn_rate``; it keeps at least MIN_SPEED_SHARE of
+that speed away from the goal, as an assembly cannot turn on the spot. The
+other members of its assembly track the rigid-body speed at their own
+positions along their headings and turn as their couplings allow (the MPC
+chooses their turn rates within the coupling polygons, as in
+drive_assembly). Robots outside the led assemblies hold still.
+
+Succeeds when every lead is within ``tolerance`` (default the setting
+``goal_tolerance``) of its goal; fails if a coupled pair of a led assembly
+is lost on the way, or once a lead has passed its goal (beyond the goal
+on its segment by more than ``tolerance``, still outside it: an assembly
+that did not turn enough does not drive on), or after ``timeout`` s (0:
+none), naming the leads not there. Status errors and progress: as go_to_goal, per lead.
+"""
+
+import math
+
+import numpy as np
+
+from puzzlebot_mpc.behaviors.base import FAILED, BehaviorError, Progress
+from puzzlebot_mpc.behaviors.go_to_goal import GoToGoal
+
+ASSEMBLY_TO_GOAL = "assembly_to_goal"
+LOOKAHEAD = 0.1         # m: the pursuit's carrot leads the lead's projection on its segment by this
+SLOW_RADIUS = 0.05      # m: inside this distance of its goal a lead slows down in proportion
+MIN_SPEED_SHARE = 0.5   # of assembly_speed: the least a lead drives (outside SLOW_RADIUS) while it turns
+
+
+class AssemblyToGoal(GoToGoal):
+    name = ASSEMBLY_TO_GOAL
+    needs_poses = True
+
+    def validate(self, poses=None):
+        super().validate(poses)
+        self.need_poses(self.robots, poses)
+        if poses is None:
+            return
+        seen = {}
+        for lead in self.robots:
+            for m in self.ctx.assembly_of(lead):
+                if m in seen:
+                    raise BehaviorError("assembly_to_goal: %s and %s lead the same assembly; name one robot "
+                                        "per assembly" % (seen[m], lead))
+                seen[m] = lead
+
+    def start(self, now, poses, static):
+        self.goals = np.array([tuple(g) for g in self.req.goals], float).reshape(-1, 2)
+        self.first_errors = None
+        self.leads = list(self.robots)
+        self.origins = np.array([poses[lead][:2] for lead in self.leads], float).reshape(-1, 2)
+        self.assemblies = {lead: self.ctx.assembly_of(lead) for lead in self.leads}
+        self.robots = [n for n in self.ctx.names if any(n in a for a in self.assemblies.values())]
+        super(GoToGoal, self).start(now, poses, static)
+        return "leading %d assemblies: %s" % (len(self.leads), ", ".join(
+            "+".join(a) for a in self.assemblies.values()))
+
+    def errors(self, poses):
+        """Per lead: its distance to its goal [m] (NaN without a pose)."""
+        out = []
+        for lead, goal in zip(self.leads, self.goals):
+            pose = poses.get(lead)
+            out.append(float("nan") if pose is None else math.hypot(pose[0] - goal[0], pose[1] - goal[1]))
+        return out
+
+    def status(self, now, poses, newly, lost, elapsed):
+        members = {m for a in self.assemblies.values() for m in a}
+        member_lost = [p for p in lost if p.robot_i in members]
+        if member_lost:
+            return Progress(FAILED, "pair(s) lost while driving: %s"
+                            % ", ".join("%s-%s" % p.robots for p in member_lost))
+        passed = [self.passed(lead, origin, goal, poses.get(lead))
+                  for lead, origin, goal in zip(self.leads, self.origins, self.goals)]
+        if any(passed):
+            return Progress(FAILED, "passed the goal: %s (an assembly turns only as its couplings allow)"
+                            % ", ".join(p for p in passed if p), self.errors(poses))
+        return super().status(now, poses, newly, lost, elapsed)
+
+    def passed(self, lead, origin, goal, pose):
+        """'pz1 62 mm to the side' when ``lead`` at ``pose`` is beyond ``goal`` on its segment from
+        ``origin`` by more than the tolerance and not within it; else ''."""
+        if pose is None:
+            return ""
+        tol, d = self.tolerance(), np.asarray(goal) - origin
+        length = float(np.linalg.norm(d))
+        if length < 1e-9:
+            return ""
+        along = float(np.dot(np.asarray(pose[:2]) - origin, d)) / length
+        dist = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        return "%s %.0f mm off" % (lead, 1e3 * dist) if along > length + tol and dist > tol else ""
+
+    def timed_out(self, now, poses, errors, elapsed):
+        tol = self.tolerance()
+        far = [n for n, e in zip(self.leads, errors) if not e <= tol]
+        return Progress(FAILED, "timeout after %.2f s; not at goal: %s" % (elapsed, ", ".join(far)), errors)
+
+    def twist(self, pose, origin, goal):
+        """(v [m/s], w [rad/s]) of a lead at ``pose`` (x, y, theta) [m, m, rad] following the segment from
+        ``origin`` to ``goal`` (x, y) [m], world frame."""
+        s = self.settings
+        p, a, b = np.asarray(pose[:2], float), np.asarray(origin, float), np.asarray(goal, float)
+        length = float(np.linalg.norm(b - a))
+        along = float(np.dot(p - a, b - a)) / length if length > 1e-9 else 0.0
+        carrot = b if along + LOOKAHEAD >= length else a + (b - a) * (along + LOOKAHEAD) / length
+        dist = float(np.linalg.norm(b - p))
+        to_carrot = carrot - p
+        bearing = math.atan2(to_carrot[1], to_carrot[0]) - pose[2]
+        v = s.assembly_speed * max(MIN_SPEED_SHARE, math.cos(bearing)) * min(1.0, dist / SLOW_RADIUS)
+        w = max(-s.assembly_turn_rate, min(s.assembly_turn_rate, v * pursuit_curvature(pose, carrot)))
+        return v, w
+
+    def objectives(self, obj, now, poses):
+        """Each lead tracks its steering twist; its followers the rigid-body speed (v only)."""
+        if poses is None:
+            return
+        vel, tol = np.zeros((len(self.ctx.names), 2)), self.tolerance()
+        for lead, origin, goal in zip(self.leads, self.origins, self.goals):
+            pose, members = poses.get(lead), self.assemblies[lead]
+            if pose is None:
+                continue
+            there = math.hypot(goal[0] - pose[0], goal[1] - pose[1]) <= tol
+            v, w = (0.0, 0.0) if there else self.twist(pose, origin, goal)
+            self.rigid_velocities(vel, lead, v, w, members, poses)
+            for m in members:
+                obj.velocity_mask[self.ctx.index[m]] = (1.0, 1.0) if m == lead else (1.0, 0.0)
+        obj.velocity = vel
+
+    def display(self, request_id, state):
+        view = super().display(request_id, state)
+        view.goals = [(n, tuple(g)) for n, g in zip(self.leads, self.req.goals)]
+        return view
+
+
+def pursuit_curvature(pose, point):
+    """[1/m] (left positive): the arc from ``pose`` (x, y, theta) tangent to its heading through ``point``
+    (x, y), world frame (pure pursuit: 2 sin(bearing) / distance)."""
+    dx, dy = point[0] - pose[0], point[1] - pose[1]
+    bearing = math.atan2(dy, dx) - pose[2]
+    return 2.0 * math.sin(bearing) / max(math.hypot(dx, dy), 1e-6)
+
