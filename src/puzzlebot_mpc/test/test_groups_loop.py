@@ -149,3 +149,19 @@ def test_a_lead_that_passes_its_goal_fails_at_once():
     status, elapsed = plant.run(BehaviorRequest("assembly_to_goal", ["pz1"], goals=[(0.1, 0.03)], tolerance=0.01,
                                                 timeout=30.0), 31.0)
     assert status.state == FAILED and "passed the goal: pz1" in status.message and elapsed < 10.0
+
+
+def test_a_line_led_by_its_back_robot_is_driven_from_its_front():
+    line = {r: (-k * GEO.body_side, 0.0, 0.0) for k, r in enumerate(GROUP_A)}     # pz1 in front
+    loop = ControlLoop(GROUP_A, KINEMATIC)
+    for a, b in zip(GROUP_A[:-1], GROUP_A[1:]):
+        loop.pairs.add_coupled(pr.make_pair(a, b, pr.ANCHOR, GEO))
+    plant = Plant(loop, line)
+    goal = (line["pz4"][0] + 0.4, 0.02)         # 2 cm to the side: the line converges onto it like a train
+    loop.request(BehaviorRequest("assembly_to_goal", ["pz4"], goals=[goal], tolerance=0.01, timeout=60.0), plant.t)
+    assert "driven by pz1" in loop.step(plant.t).status.message
+    status, _ = plant.run(BehaviorRequest("assembly_to_goal", ["pz4"], goals=[goal], tolerance=0.01,
+                                          timeout=60.0), 61.0)
+    assert status.state == SUCCEEDED, status.message
+    p = plant.poses["pz4"]
+    assert math.hypot(p[0] - goal[0], p[1] - goal[1]) <= 0.01 and len(loop.pairs.coupled) == 3

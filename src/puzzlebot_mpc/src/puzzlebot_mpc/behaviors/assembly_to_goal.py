@@ -2,8 +2,13 @@
 
 Each named robot (a *lead*) belongs to a different assembly (a coupled
 line, say, or a single robot); the assemblies drive at once, each as one
-body. A lead follows the straight segment from where it stood at the start
-to its goal by pure pursuit: it steers towards a carrot LOOKAHEAD ahead of
+body. Each assembly is steered by its *driver*: the member furthest ahead
+towards the goal at the start (an assembly steered from behind is pushed
+like a reversing trailer and folds). The rest of the assembly trails the
+driver along its path, so the driver makes for the point that lies, seen
+from the lead's start, beyond the lead's goal by the driver's distance from
+the lead: it follows the straight segment from where it stood at the start
+to that point by pure pursuit, until the lead is at its goal: it steers towards a carrot LOOKAHEAD ahead of
 its projection on the segment (the goal itself at the end), at
 ``assembly_speed`` times the cosine of the carrot's bearing (never
 backwards), slowing down inside SLOW_RADIUS of the goal, with its turn rate
@@ -56,12 +61,33 @@ class AssemblyToGoal(GoToGoal):
         self.goals = np.array([tuple(g) for g in self.req.goals], float).reshape(-1, 2)
         self.first_errors = None
         self.leads = list(self.robots)
-        self.origins = np.array([poses[lead][:2] for lead in self.leads], float).reshape(-1, 2)
         self.assemblies = {lead: self.ctx.assembly_of(lead) for lead in self.leads}
+        self.drivers = [self.driver(lead, goal, poses) for lead, goal in zip(self.leads, self.goals)]
+        self.paths = [self.path(d, lead, goal, poses) for d, lead, goal in zip(self.drivers, self.leads, self.goals)]
+        self.origins = np.array([poses[lead][:2] for lead in self.leads], float).reshape(-1, 2)
         self.robots = [n for n in self.ctx.names if any(n in a for a in self.assemblies.values())]
         super(GoToGoal, self).start(now, poses, static)
         return "leading %d assemblies: %s" % (len(self.leads), ", ".join(
-            "+".join(a) for a in self.assemblies.values()))
+            "+".join(a) + " (driven by %s)" % d for a, d in zip(self.assemblies.values(), self.drivers)))
+
+    def driver(self, lead, goal, poses):
+        """The member of ``lead``'s assembly furthest ahead towards ``goal`` (the lead on a tie)."""
+        start = np.array(poses[lead][:2], float)
+        direction = np.asarray(goal) - start
+        ahead = {m: float(np.dot(np.array(poses[m][:2]) - start, direction)) for m in self.assemblies[lead]}
+        best = max(ahead.values())
+        return lead if ahead[lead] >= best - 1e-9 else max(ahead, key=ahead.get)
+
+    @staticmethod
+    def path(driver, lead, goal, poses):
+        """(start, end) [m] of the driver's segment: from where it stands to the point beyond ``goal`` (seen
+        from the lead) by its distance from the lead."""
+        start, lead_at = np.array(poses[driver][:2], float), np.array(poses[lead][:2], float)
+        direction = np.asarray(goal) - lead_at
+        length = float(np.linalg.norm(direction))
+        if length < 1e-9:
+            return start, start
+        return start, np.asarray(goal) + direction / length * float(np.linalg.norm(start - lead_at))
 
     def errors(self, poses):
         """Per lead: its distance to its goal [m] (NaN without a pose)."""
@@ -77,19 +103,20 @@ class AssemblyToGoal(GoToGoal):
         if member_lost:
             return Progress(FAILED, "pair(s) lost while driving: %s"
                             % ", ".join("%s-%s" % p.robots for p in member_lost))
-        passed = [self.passed(lead, origin, goal, poses.get(lead))
-                  for lead, origin, goal in zip(self.leads, self.origins, self.goals)]
+        passed = [self.passed(k, poses) for k in range(len(self.leads))]
         if any(passed):
             return Progress(FAILED, "passed the goal: %s (an assembly turns only as its couplings allow)"
                             % ", ".join(p for p in passed if p), self.errors(poses))
         return super().status(now, poses, newly, lost, elapsed)
 
-    def passed(self, lead, origin, goal, pose):
-        """'pz1 62 mm to the side' when ``lead`` at ``pose`` is beyond ``goal`` on its segment from
-        ``origin`` by more than the tolerance and not within it; else ''."""
+    def passed(self, k, poses):
+        """'pz1 62 mm off' when lead ``k`` is beyond its goal (on the segment from where it started) by more
+        than the tolerance and not within it; else ''."""
+        lead, origin, goal = self.leads[k], self.origins[k], self.goals[k]
+        pose = poses.get(lead)
         if pose is None:
             return ""
-        tol, d = self.tolerance(), np.asarray(goal) - origin
+        tol, d = self.tolerance(), goal - origin
         length = float(np.linalg.norm(d))
         if length < 1e-9:
             return ""
@@ -118,19 +145,19 @@ class AssemblyToGoal(GoToGoal):
         return v, w
 
     def objectives(self, obj, now, poses):
-        """Each lead tracks its steering twist; its followers the rigid-body speed (v only)."""
+        """Each driver tracks its steering twist; the rest of its assembly the rigid-body speed (v only)."""
         if poses is None:
             return
         vel, tol = np.zeros((len(self.ctx.names), 2)), self.tolerance()
-        for lead, origin, goal in zip(self.leads, self.origins, self.goals):
-            pose, members = poses.get(lead), self.assemblies[lead]
-            if pose is None:
+        for lead, driver, (origin, end), goal in zip(self.leads, self.drivers, self.paths, self.goals):
+            pose, dpose, members = poses.get(lead), poses.get(driver), self.assemblies[lead]
+            if pose is None or dpose is None:
                 continue
             there = math.hypot(goal[0] - pose[0], goal[1] - pose[1]) <= tol
-            v, w = (0.0, 0.0) if there else self.twist(pose, origin, goal)
-            self.rigid_velocities(vel, lead, v, w, members, poses)
+            v, w = (0.0, 0.0) if there else self.twist(dpose, origin, end)
+            self.rigid_velocities(vel, driver, v, w, members, poses)
             for m in members:
-                obj.velocity_mask[self.ctx.index[m]] = (1.0, 1.0) if m == lead else (1.0, 0.0)
+                obj.velocity_mask[self.ctx.index[m]] = (1.0, 1.0) if m == driver else (1.0, 0.0)
         obj.velocity = vel
 
     def display(self, request_id, state):
