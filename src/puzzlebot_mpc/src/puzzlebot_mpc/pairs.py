@@ -329,7 +329,6 @@ class CoupledPairs(dict):
         super().update(*args, **kwargs)
 
 
-
 def _hops(edges, start):
     """{robot: hops from the nearest of ``start``} over the graph ``edges`` ({robot: neighbours}): the
     robots reachable from ``start``."""
@@ -353,6 +352,7 @@ def _components(edges):
             for m in _hops(edges, [r]):
                 out[m] = r
     return out
+
 
 @dataclass
 class PairBook:
@@ -446,8 +446,9 @@ class PairBook:
         exist or form at once in each target (a connected part of the graph of
         coupled and goal pairs; a couple with groups forms several targets at
         once; 0: no limit); a seed then starts where its target's graph has its
-        middle, so the assembly grows outwards at both ends. Pairs already being aligned keep their place (switching partners
-        mid-way wastes the approach), pairs whose manoeuvre is under way (a
+        middle, so the assembly grows outwards at both ends. Pairs already
+        being aligned keep their place (switching partners mid-way wastes the
+        approach), pairs whose manoeuvre is under way (a
         pair being re-seated) first; the rest are taken in priority order,
         growing first, then seeding, then joining.
         A goal pair between two robots of the same assembly (closing a loop,

@@ -37,7 +37,7 @@ from puzzlebot_mpc.behaviors.go_to_goal import GoToGoal
 ASSEMBLY_TO_GOAL = "assembly_to_goal"
 LOOKAHEAD = 0.1         # m: the pursuit's carrot leads the lead's projection on its segment by this
 SLOW_RADIUS = 0.05      # m: inside this distance of its goal a lead slows down in proportion
-MIN_SPEED_SHARE = 0.5   # of assembly_speed: the least a lead drives (outside SLOW_RADIUS) while it turns
+MIN_SPEED_SHARE = 0.5   # of assembly_speed: the least a driver drives (outside SLOW_RADIUS) while it turns
 
 
 class AssemblyToGoal(GoToGoal):
@@ -89,13 +89,9 @@ class AssemblyToGoal(GoToGoal):
             return start, start
         return start, np.asarray(goal) + direction / length * float(np.linalg.norm(start - lead_at))
 
-    def errors(self, poses):
-        """Per lead: its distance to its goal [m] (NaN without a pose)."""
-        out = []
-        for lead, goal in zip(self.leads, self.goals):
-            pose = poses.get(lead)
-            out.append(float("nan") if pose is None else math.hypot(pose[0] - goal[0], pose[1] - goal[1]))
-        return out
+    def goal_robots(self):
+        """The leads (the goals are theirs; ``robots`` is every member of a led assembly once started)."""
+        return self.leads
 
     def status(self, now, poses, newly, lost, elapsed):
         members = {m for a in self.assemblies.values() for m in a}
@@ -123,11 +119,6 @@ class AssemblyToGoal(GoToGoal):
         along = float(np.dot(np.asarray(pose[:2]) - origin, d)) / length
         dist = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
         return "%s %.0f mm off" % (lead, 1e3 * dist) if along > length + tol and dist > tol else ""
-
-    def timed_out(self, now, poses, errors, elapsed):
-        tol = self.tolerance()
-        far = [n for n, e in zip(self.leads, errors) if not e <= tol]
-        return Progress(FAILED, "timeout after %.2f s; not at goal: %s" % (elapsed, ", ".join(far)), errors)
 
     def twist(self, pose, origin, goal):
         """(v [m/s], w [rad/s]) of a lead at ``pose`` (x, y, theta) [m, m, rad] following the segment from
@@ -159,11 +150,6 @@ class AssemblyToGoal(GoToGoal):
             for m in members:
                 obj.velocity_mask[self.ctx.index[m]] = (1.0, 1.0) if m == driver else (1.0, 0.0)
         obj.velocity = vel
-
-    def display(self, request_id, state):
-        view = super().display(request_id, state)
-        view.goals = [(n, tuple(g)) for n, g in zip(self.leads, self.req.goals)]
-        return view
 
 
 def pursuit_curvature(pose, point):

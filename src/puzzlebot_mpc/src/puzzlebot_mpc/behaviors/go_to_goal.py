@@ -38,9 +38,13 @@ class GoToGoal(Behavior):
         """[m]: the request's tolerance, or the setting goal_tolerance."""
         return self.req.tolerance or self.settings.goal_tolerance
 
+    def goal_robots(self):
+        """The robots the goals are for (one per goal), in order."""
+        return self.robots
+
     def errors(self, poses):
         out = []
-        for name, goal in zip(self.robots, self.goals):
+        for name, goal in zip(self.goal_robots(), self.goals):
             pose = poses.get(name)
             out.append(float("nan") if pose is None else math.hypot(pose[0] - goal[0], pose[1] - goal[1]))
         return out
@@ -65,10 +69,10 @@ class GoToGoal(Behavior):
 
     def timed_out(self, now, poses, errors, elapsed):
         tol = self.tolerance()
-        far = [n for n, e in zip(self.robots, errors) if not e <= tol]
+        far = [n for n, e in zip(self.goal_robots(), errors) if not e <= tol]
         return Progress(FAILED, "timeout after %.2f s; not at goal: %s" % (elapsed, ", ".join(far)), errors)
 
     def display(self, request_id, state):
         view = super().display(request_id, state)
-        view.goals = [(n, tuple(g)) for n, g in zip(self.robots, self.req.goals)]
+        view.goals = [(n, tuple(g)) for n, g in zip(self.goal_robots(), self.req.goals)]
         return view
