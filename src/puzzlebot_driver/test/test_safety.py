@@ -100,6 +100,25 @@ def test_stale_pose_zeroes_one_robot_and_resets_its_integrator():
     assert d["a1"].reason == safety.DRIVE and d["a1"].left > 0
 
 
+def test_after_a_pose_gap_the_loop_restarts_on_feed_forward_alone():
+    c = core()
+    for k in range(20):                                 # a0 driving at 0.05 m/s along x
+        c.on_pose("a0", 1.0 + 0.01 * k, 0.0005 * k, 0.0, 0.0)
+    c.on_cmd("a0", 1.19, 0.05, 0.0)
+    assert c.tick(1.19, 1 / 30)["a0"].reason == safety.DRIVE
+    assert c.estimate("a0") is not None
+    d = c.tick(1.5, 1 / 30)                             # no pose for 0.3 s: stale
+    assert d["a0"].reason == safety.POSE_STALE and c.estimate("a0") is None
+    c.on_pose("a0", 1.5, 0.0, 0.0, 0.0)                 # the robot stopped meanwhile: poses again
+    c.on_cmd("a0", 1.5, 0.05, 0.0)
+    d = c.tick(1.5, 1 / 30)["a0"]
+    g = c.controllers["a0"].gains
+    # no velocity estimated across the gap (it would read "standing still" and add kp_v times the whole
+    # command): the feed-forward alone
+    assert d.reason == safety.DRIVE
+    assert d.left == pytest.approx(g.pwm_per_v * 0.05 + g.pwm_deadband + g.trim_left, abs=1)
+
+
 def test_future_stamps_are_rejected_clock_check():
     c = core()
     assert c.on_pose("a0", 10.04, 0, 0, 0, now=10.0).accepted

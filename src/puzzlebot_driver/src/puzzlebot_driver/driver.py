@@ -186,6 +186,8 @@ class DriverCore:
                                         state.cmd_time, state.cmd_rejected, self.params, linked)
             if reason != safety.DRIVE:
                 self.controllers[name].reset()
+                if reason in (safety.NO_POSE, safety.POSE_STALE):
+                    self.estimators[name].reset()     # no velocity across the gap: feed-forward only on resume
                 decision = Decision(0, 0, reason)
             else:
                 try:
