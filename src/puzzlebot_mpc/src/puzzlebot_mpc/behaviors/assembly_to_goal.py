@@ -14,10 +14,12 @@ its projection on the segment (the goal itself at the end), at
 backwards), slowing down inside SLOW_RADIUS of the goal, with its turn rate
 clipped to ``assembly_turn_rate``; it keeps at least MIN_SPEED_SHARE of
 that speed away from the goal, as an assembly cannot turn on the spot. The
-other members of its assembly track the rigid-body speed at their own
-positions along their headings and turn as their couplings allow (the MPC
-chooses their turn rates within the coupling polygons, as in
-drive_assembly). Robots outside the led assemblies hold still.
+other members follow like the cars of a train: each drives at the
+rigid-body speed at its own position along its heading and turns towards
+the heading of the member one coupling nearer the driver (FOLLOW_GAIN).
+These commands are sent as they are, not through the MPC's plan (see
+:meth:`AssemblyToGoal.objectives`). Robots outside the led assemblies
+hold still.
 
 Succeeds when every lead is within ``tolerance`` (default the setting
 ``goal_tolerance``) of its goal; fails if a coupled pair of a led assembly
@@ -37,6 +39,7 @@ from puzzlebot_mpc.behaviors.go_to_goal import GoToGoal
 ASSEMBLY_TO_GOAL = "assembly_to_goal"
 LOOKAHEAD = 0.1         # m: the pursuit's carrot leads the lead's projection on its segment by this
 SLOW_RADIUS = 0.05      # m: inside this distance of its goal a lead slows down in proportion
+FOLLOW_GAIN = 1.0       # 1/s: a follower turns at this times its heading error to the member it follows
 MIN_SPEED_SHARE = 0.5   # of assembly_speed: the least a driver drives (outside SLOW_RADIUS) while it turns
 
 
@@ -120,6 +123,25 @@ class AssemblyToGoal(GoToGoal):
         dist = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
         return "%s %.0f mm off" % (lead, 1e3 * dist) if along > length + tol and dist > tol else ""
 
+    def followed(self, driver, members):
+        """{member: the member it follows}: its neighbour one coupling nearer ``driver`` (breadth first
+        over the coupled pairs among ``members``)."""
+        neighbours = {}
+        for p in self.ctx.pairs.coupled.values():
+            neighbours.setdefault(p.robot_i, set()).add(p.robot_j)
+            neighbours.setdefault(p.robot_j, set()).add(p.robot_i)
+        out, frontier, seen = {}, [driver], {driver}
+        while frontier:
+            nxt = []
+            for r in frontier:
+                for n in sorted(neighbours.get(r, ())):
+                    if n not in seen and n in members:
+                        seen.add(n)
+                        out[n] = r
+                        nxt.append(n)
+            frontier = nxt
+        return out
+
     def twist(self, pose, origin, goal):
         """(v [m/s], w [rad/s]) of a lead at ``pose`` (x, y, theta) [m, m, rad] following the segment from
         ``origin`` to ``goal`` (x, y) [m], world frame."""
@@ -136,10 +158,15 @@ class AssemblyToGoal(GoToGoal):
         return v, w
 
     def objectives(self, obj, now, poses):
-        """Each driver tracks its steering twist; the rest of its assembly the rigid-body speed (v only)."""
+        """The commands of every led assembly, sent as they are (controller.Objectives.open_loop): the
+        driver its steering twist, every other member the rigid-body speed along its heading and a turn
+        towards the heading of the member it follows. The MPC's references are the same speeds (its plan
+        is not what the robots get: planned with the coupling polygons, it drives the followers a little
+        faster than the driver and turns them against it, and a chain pushed from behind that way does not
+        turn in Bullet; the train's commands bend it)."""
         if poses is None:
             return
-        vel, tol = np.zeros((len(self.ctx.names), 2)), self.tolerance()
+        s, vel, tol = self.settings, np.zeros((len(self.ctx.names), 2)), self.tolerance()
         for lead, driver, (origin, end), goal in zip(self.leads, self.drivers, self.paths, self.goals):
             pose, dpose, members = poses.get(lead), poses.get(driver), self.assemblies[lead]
             if pose is None or dpose is None:
@@ -147,8 +174,15 @@ class AssemblyToGoal(GoToGoal):
             there = math.hypot(goal[0] - pose[0], goal[1] - pose[1]) <= tol
             v, w = (0.0, 0.0) if there else self.twist(dpose, origin, end)
             self.rigid_velocities(vel, driver, v, w, members, poses)
+            ahead = self.followed(driver, members)
             for m in members:
-                obj.velocity_mask[self.ctx.index[m]] = (1.0, 1.0) if m == driver else (1.0, 0.0)
+                i = self.ctx.index[m]
+                obj.velocity_mask[i] = (1.0, 1.0) if m == driver else (1.0, 0.0)
+                if m == driver:
+                    obj.open_loop[i] = (float(v), float(w))
+                elif poses.get(ahead.get(m)) is not None and poses.get(m) is not None:
+                    error = math.remainder(poses[ahead[m]][2] - poses[m][2], 2 * math.pi)
+                    obj.open_loop[i] = (float(vel[i, 0]), max(-s.w_max, min(s.w_max, FOLLOW_GAIN * error)))
         obj.velocity = vel
 
 
