@@ -104,3 +104,20 @@ def test_a_held_robot_is_left_out_of_the_pairs_and_refused_by_new_behaviours():
             feed(loop, n, k * FRAME, p)
     out = loop.step((1 + N_GOOD) * FRAME)
     assert len(loop.pairs.active) == 1 and out.stale == []
+
+
+def test_a_rejected_frame_holds_the_robot_for_one_step_however_fast_good_frames_follow():
+    loop = ControlLoop(["pz1", "pz2"], MPCSettings())
+    start = {"pz1": (0.0, 0.0, 0.0), "pz2": (0.0, 0.15, 0.0)}
+    for n, p in start.items():
+        feed(loop, n, 0.0, p)
+    loop.request(BehaviorRequest("follow_velocity", ["pz1", "pz2"], velocities=[(0.03, 0.0)] * 2), 0.0)
+    assert loop.step(0.0).commands["pz1"] != (0.0, 0.0)
+    feed(loop, "pz1", FRAME, start["pz1"], "heading flipped by pi")
+    for k in range(2, 3 + 2 * N_GOOD):              # the gate's hold is over before the next step
+        for n, p in start.items():
+            feed(loop, n, k * FRAME, p)
+    assert loop.step((3 + 2 * N_GOOD) * FRAME).commands["pz1"] == (0.0, 0.0)
+    for n, p in start.items():
+        feed(loop, n, (4 + 2 * N_GOOD) * FRAME, p)
+    assert loop.step((4 + 2 * N_GOOD) * FRAME).commands["pz1"] != (0.0, 0.0)   # once only

@@ -52,7 +52,10 @@ class PoseBook:
 
     A robot is *fresh* when its latest accepted pose is at most ``timeout``
     old and its gate does not hold it (no rejection in the last
-    ``reacquire_frames`` frames): the controller plans only with those.
+    ``reacquire_frames`` frames) and no frame of it was rejected since the
+    last control step (:meth:`step_done`: every rejection holds the robot for
+    at least one step, however fast the good frames after it arrive): the
+    controller plans only with those.
     """
 
     def __init__(self, names, timeout, v_max, w_max, gate_params=PoseGateParams()):
@@ -61,6 +64,7 @@ class PoseBook:
         self._poses: Dict[str, Optional[PoseSample]] = {n: None for n in names}
         self.gates = {n: PoseGate(n, v_max, w_max, gate_params) for n in names}
         self.last_verdict: Dict[str, Optional[Verdict]] = {n: None for n in names}
+        self._rejected_since_step = set()
 
     def update(self, name, stamp, x, y, yaw, quaternion=None, z=0.0):
         """Judge a sample (``yaw`` [rad]; the ``quaternion`` (x, y, z, w) it came from and the height
@@ -71,6 +75,7 @@ class PoseBook:
         verdict = self.gates[name].check(stamp, x, y, yaw, quaternion, z)
         self.last_verdict[name] = verdict
         if not verdict.accepted:
+            self._rejected_since_step.add(name)
             return "%s: %s" % (name, verdict.reason)
         self._poses[name] = PoseSample(float(stamp), float(x), float(y), float(verdict.yaw))
         return None
@@ -82,10 +87,14 @@ class PoseBook:
         """True while the robot's pose gate holds it (recent rejections)."""
         return self.gates[name].held
 
+    def step_done(self):
+        """A control step has read the poses: rejections before it have held their robots once."""
+        self._rejected_since_step.clear()
+
     def fresh(self, name, now):
         """(x, y, yaw) if the latest sample is at most ``timeout`` old and not held, else None."""
         p = self._poses[name]
-        if p is None or now - p.stamp > self.timeout or self.gates[name].held:
+        if p is None or now - p.stamp > self.timeout or self.gates[name].held or name in self._rejected_since_step:
             return None
         return (p.x, p.y, p.yaw)
 
@@ -216,6 +225,7 @@ class ControlLoop:
     def step(self, now):
         n = len(self.names)
         poses = self.fresh_poses(now)
+        self.poses.step_done()
         self._start_due(now, poses)
         newly, lost = self.pairs.update(poses, now)
         status = self.behaviors.update(now, poses, newly, lost)
