@@ -472,14 +472,15 @@ class PairBook:
 
         keep = [q for q in ranked if (q in self.active or underway(q)) and not set(q.robots) & missing]
         keep.sort(key=lambda q: not underway(q))
-        graph = self._goal_graph()
+        graph = self._goal_graph() if self.max_seeds else {}
         eccentricity = self._seed_eccentricity(graph) if self.max_seeds else {}
         rest = sorted((q for q in ranked if q not in keep and not set(q.robots) & missing),
                       key=lambda q: (kinds[kind(q)], eccentricity.get(q.key, 0)))
-        component = _components(graph)
-        assemblies = {}                   # target component -> sub-assemblies in it (formed or forming)
-        for g in {g for g in group_of.values() if len(g) > 1}:
-            assemblies[component[g[0]]] = assemblies.get(component[g[0]], 0) + 1
+        component, assemblies = {}, {}   # robot -> its target; target -> sub-assemblies in it (formed, forming)
+        if self.max_seeds:
+            component = _components(graph)
+            for g in {g for g in group_of.values() if len(g) > 1}:
+                assemblies[component[g[0]]] = assemblies.get(component[g[0]], 0) + 1
         used, moving, holding, chosen = set(), set(), set(), []
         for q in keep + rest:
             if q.robot_i in used or q.robot_j in used:
@@ -492,7 +493,7 @@ class PairBook:
                 continue
             if any(g in moving for g in hg):
                 continue
-            c = component[q.robot_i]
+            c = component.get(q.robot_i)
             if q not in keep and kind(q) == "seed" and self.max_seeds and assemblies.get(c, 0) >= self.max_seeds:
                 continue
             if kind(q) == "seed":

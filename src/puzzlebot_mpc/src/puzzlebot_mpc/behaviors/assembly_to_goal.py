@@ -68,6 +68,9 @@ class AssemblyToGoal(GoToGoal):
         self.drivers = [self.driver(lead, goal, poses) for lead, goal in zip(self.leads, self.goals)]
         self.paths = [self.path(d, lead, goal, poses) for d, lead, goal in zip(self.drivers, self.leads, self.goals)]
         self.origins = np.array([poses[lead][:2] for lead in self.leads], float).reshape(-1, 2)
+        self.ahead = {}                   # member -> the member it follows, over every led assembly
+        for lead, driver in zip(self.leads, self.drivers):
+            self.ahead.update(self.followed(driver, self.assemblies[lead]))
         self.robots = [n for n in self.ctx.names if any(n in a for a in self.assemblies.values())]
         super(GoToGoal, self).start(now, poses, static)
         return "leading %d assemblies: %s" % (len(self.leads), ", ".join(
@@ -97,11 +100,9 @@ class AssemblyToGoal(GoToGoal):
         return self.leads
 
     def status(self, now, poses, newly, lost, elapsed):
-        members = {m for a in self.assemblies.values() for m in a}
-        member_lost = [p for p in lost if p.robot_i in members]
-        if member_lost:
-            return Progress(FAILED, "pair(s) lost while driving: %s"
-                            % ", ".join("%s-%s" % p.robots for p in member_lost))
+        failed = self.lost_while_driving(lost, set(self.robots))
+        if failed:
+            return failed
         passed = [self.passed(k, poses) for k in range(len(self.leads))]
         if any(passed):
             return Progress(FAILED, "passed the goal: %s (an assembly turns only as its couplings allow)"
@@ -115,11 +116,10 @@ class AssemblyToGoal(GoToGoal):
         pose = poses.get(lead)
         if pose is None:
             return ""
-        tol, d = self.tolerance(), goal - origin
-        length = float(np.linalg.norm(d))
+        tol = self.tolerance()
+        along, length = along_segment(pose, origin, goal)
         if length < 1e-9:
             return ""
-        along = float(np.dot(np.asarray(pose[:2]) - origin, d)) / length
         dist = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
         return "%s %.0f mm off" % (lead, 1e3 * dist) if along > length + tol and dist > tol else ""
 
@@ -143,12 +143,11 @@ class AssemblyToGoal(GoToGoal):
         return out
 
     def twist(self, pose, origin, goal):
-        """(v [m/s], w [rad/s]) of a lead at ``pose`` (x, y, theta) [m, m, rad] following the segment from
+        """(v [m/s], w [rad/s]) of a driver at ``pose`` (x, y, theta) [m, m, rad] following the segment from
         ``origin`` to ``goal`` (x, y) [m], world frame."""
         s = self.settings
         p, a, b = np.asarray(pose[:2], float), np.asarray(origin, float), np.asarray(goal, float)
-        length = float(np.linalg.norm(b - a))
-        along = float(np.dot(p - a, b - a)) / length if length > 1e-9 else 0.0
+        along, length = along_segment(pose, a, b)
         carrot = b if along + LOOKAHEAD >= length else a + (b - a) * (along + LOOKAHEAD) / length
         dist = float(np.linalg.norm(b - p))
         to_carrot = carrot - p
@@ -174,7 +173,7 @@ class AssemblyToGoal(GoToGoal):
             there = math.hypot(goal[0] - pose[0], goal[1] - pose[1]) <= tol
             v, w = (0.0, 0.0) if there else self.twist(dpose, origin, end)
             self.rigid_velocities(vel, driver, v, w, members, poses)
-            ahead = self.followed(driver, members)
+            ahead = self.ahead
             for m in members:
                 i = self.ctx.index[m]
                 obj.velocity_mask[i] = (1.0, 1.0) if m == driver else (1.0, 0.0)
@@ -184,6 +183,16 @@ class AssemblyToGoal(GoToGoal):
                     error = math.remainder(poses[ahead[m]][2] - poses[m][2], 2 * math.pi)
                     obj.open_loop[i] = (float(vel[i, 0]), max(-s.w_max, min(s.w_max, FOLLOW_GAIN * error)))
         obj.velocity = vel
+
+
+def along_segment(pose, a, b):
+    """(distance [m] of ``pose``'s (x, y) along the segment from ``a`` to ``b``, measured from ``a``; the
+    segment's length [m]); the distance is 0 for a segment shorter than 1 nm."""
+    d = np.asarray(b, float) - np.asarray(a, float)
+    length = float(np.linalg.norm(d))
+    if length < 1e-9:
+        return 0.0, length
+    return float(np.dot(np.asarray(pose[:2], float) - a, d)) / length, length
 
 
 def pursuit_curvature(pose, point):

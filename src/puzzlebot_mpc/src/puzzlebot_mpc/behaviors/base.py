@@ -244,6 +244,14 @@ class Behavior:
             vel[index[m]] = (max(-s.v_max, min(s.v_max, vm)), w)
         return vel
 
+    def lost_while_driving(self, lost, members):
+        """A FAILED Progress naming the pairs of ``lost`` with a robot among ``members`` (an assembly that
+        drives lost a coupling), or None."""
+        gone = [p for p in lost if p.robot_i in members]
+        if not gone:
+            return None
+        return Progress(FAILED, "pair(s) lost while driving: %s" % ", ".join("%s-%s" % p.robots for p in gone))
+
     def hold(self):
         """The velocity-mask weight of a robot that holds still: sqrt(hold_scale)."""
         return math.sqrt(self.settings.hold_scale)

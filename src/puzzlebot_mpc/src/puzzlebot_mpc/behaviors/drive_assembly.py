@@ -49,10 +49,9 @@ class DriveAssembly(Behavior):
         return message
 
     def status(self, now, poses, newly, lost, elapsed):
-        member_lost = [p for p in lost if p.robot_i in self.assembly]
-        if member_lost:
-            return Progress(FAILED, "pair(s) lost while driving: %s"
-                            % ", ".join("%s-%s" % p.robots for p in member_lost))
+        failed = self.lost_while_driving(lost, self.assembly)
+        if failed:
+            return failed
         pose = poses.get(self.lead)
         if pose is None:
             return Progress(errors=[float("nan")])
