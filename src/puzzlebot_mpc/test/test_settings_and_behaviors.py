@@ -95,9 +95,11 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
 
     far = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.15, 0.0, 0.0)}
     m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=far)
-    assert (step(0.1, far) == 0.0).all()                               # lining up: both move
+    mask = step(0.1, far)
     (pair,) = m.pairs.active
     a, o = pair.robot_i, pair.robot_j                                  # o docks (the opening robot)
+    assert mask[m.index[o]] == pytest.approx([0.0, 0.0])              # lining up: the mover drives ...
+    assert mask[m.index[a]] == pytest.approx([math.sqrt(settings.hold_scale), 0.0])  # ... a turns in place
     inside = {a: (0.0, 0.0, 0.0), o: (-m.geometry.body_side - 0.008, 0.0, 0.0)}   # head 8 mm in
     mask = step(0.2, inside)
     assert pair.status == 1                                            # head_aligned
@@ -112,6 +114,16 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
     assert obj.open_loop[m.index[o]] == pytest.approx((settings.dock_push_speed, 0.0))
     assert mask[m.index[o]] == pytest.approx([1.0, 1.0])
     assert not [p for p in obj.pairs if p.active]
+
+
+def test_a_seed_pairs_holder_drives_too_when_told():
+    m = BehaviorManager(["pz1", "pz2"], MPCSettings(seed_holder_turns=False))
+    far = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.15, 0.0, 0.0)}
+    m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=far)
+    m.pairs.update(far, 0.1)
+    m.update(0.1, far)
+    m.pairs.assign_active(far)
+    assert (m.objectives(0.1, far).velocity_mask == 0.0).all()         # lining up: both robots drive
 
 
 # ------------------------------------------------- decouple: the partner turns the other way

@@ -103,6 +103,7 @@ class MPCSettings:
     decouple_settle_speed: float = 0.01  # m/s: after the release both robots push back into their assemblies ...
     decouple_settle_time: float = 1.5    # s: ... for this long (re-seats the neighbours' anchors the wiggle bent)
     decouple_confirm_steps: int = 3  # consecutive control steps the release must be seen
+    seed_holder_turns: bool = True   # a seed pair's holder turns in place to line up (false: it drives too)
     assembly_seeds: int = 1          # sub-assemblies a couple forms at once in each target (0: every seed
                                      # that can go; pairs.PairBook)
     # docking an anchor pair and proving it seated (puzzlebot_mpc/docking.py; dock_* = DockingSettings fields)

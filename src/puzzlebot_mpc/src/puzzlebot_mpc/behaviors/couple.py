@@ -157,7 +157,8 @@ class Couple(Behavior):
             seed = len(mg) == len(hg) == 1
             for m in hg:
                 free = seed and not driven and p.status != pr.HEAD_ALIGNED
-                obj.velocity_mask[ctx.index[m]] = 0.0 if free else hold
+                obj.velocity_mask[ctx.index[m]] = ((hold, 0.0) if self.settings.seed_holder_turns else 0.0) \
+                    if free else hold
             if not driven:
                 for m in mg:
                     obj.velocity_mask[ctx.index[m]] = 0.0
