@@ -79,7 +79,6 @@ class Seating:
     yaw: float = math.inf            # rad: |heading error| of the pair
     confirm_steps: int = 1           # consecutive updates the head_inserted condition must hold
     align_timeout: float = math.inf  # s: head_aligned longer than this without insertion -> decoupled
-    align_yaw: float = math.inf      # rad: decoupled -> head_aligned only with |heading error| this small
 
 
 @dataclass
@@ -224,9 +223,8 @@ def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=No
     status = pair.status
     if status == DECOUPLED:
         pair.confirmed = 0
-        if (head_margin(pair, pose_i, pose_j, footprint) >= -eps
-                and through_opening(pair, pose_i, pose_j, geometry, eps)
-                and abs(alignment_error(pair, pose_i, pose_j)[1]) <= seating.align_yaw):
+        if head_margin(pair, pose_i, pose_j, footprint) >= -eps and through_opening(pair, pose_i, pose_j,
+                                                                                     geometry, eps):
             return HEAD_ALIGNED
         return DECOUPLED
     if status == HEAD_ALIGNED:

@@ -77,8 +77,6 @@ class MPCSettings:
     insert_yaw_tolerance: float = 0.1    # rad: ... and the pair's headings agree this well
     insert_confirm_steps: int = 3    # consecutive control steps the head_inserted condition must hold
     insert_timeout: float = 4.0      # s: head_aligned for longer (a jammed anchor): back off, line up again
-    insert_align_yaw: float = 0.2    # rad: a head in the opening counts as aligned only with the headings this
-                                     # close (wider: pushed in at an angle the MPC cannot turn out of in contact)
     hardware_v_max: float = V_MAX    # m/s: the robots' own speed limit (open-loop commands stay within it)
     hardware_w_max: float = W_MAX    # rad/s: the robots' own turn-rate limit
     wiggle_v_bias: float = 0.03      # m/s: forward speed of the anchor robot while it wiggles out
@@ -151,7 +149,7 @@ class MPCSettings:
         from puzzlebot_mpc.pairs import Seating
 
         return Seating(self.insert_lateral_tolerance, self.insert_yaw_tolerance, self.insert_confirm_steps,
-                       self.insert_timeout, self.insert_align_yaw)
+                       self.insert_timeout)
 
     @classmethod
     def from_dict(cls, data, where="mpc"):
@@ -167,7 +165,7 @@ class MPCSettings:
                                 "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
-                                "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout", "insert_align_yaw",
+                                "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout",
                                 "decouple_confirm_steps",
                                 "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip",
                                 "w_slack_butterfly"], where)
