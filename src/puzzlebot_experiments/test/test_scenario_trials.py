@@ -102,3 +102,15 @@ def test_a_failed_step_says_both_what_timed_out_and_what_bullet_contradicts():
     assert step_failure(dict(timeout, problems=[])).startswith("timeout after 180.00 s")
     assert step_failure({"state": "succeeded", "problems": ["a-b not seated", "c-d not seated"]}) == \
         "a-b not seated, c-d not seated"
+
+
+def test_an_error_in_the_stack_fails_its_trial_and_says_so(monkeypatch):
+    from puzzlebot_experiments import scenario_trials as st
+
+    def broken(self, req, limit, on_tick=None):
+        raise ZeroDivisionError("division by zero")
+
+    monkeypatch.setattr(st.ClosedLoop, "run_behavior", broken)
+    rec = run_trial(SCENARIOS, "couple2", seed=1, trial=0)          # the sweep goes on: a record, no raise
+    assert not rec["success"] and len(rec["steps"]) == 1
+    assert rec["steps"][0]["state"] == "error" and "ZeroDivisionError" in rec["steps"][0]["message"]

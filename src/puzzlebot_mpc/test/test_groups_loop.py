@@ -143,6 +143,23 @@ def test_a_lost_pair_fails_the_drive():
     assert status.state == FAILED and "lost" in status.message
 
 
+def test_a_pair_lost_part_way_fails_the_drive_without_an_error():
+    loop = ControlLoop(["pz1", "pz2"], KINEMATIC)
+    front = (0.0, 0.0, 0.0)
+    loop.on_pose("pz1", 0.0, *front)
+    loop.on_pose("pz2", 0.0, -GEO.body_side, 0.0, 0.0)          # coupled behind pz1
+    loop.pairs.add_coupled(pr.make_pair("pz1", "pz2", pr.ANCHOR, GEO))
+    rid = loop.request(BehaviorRequest("assembly_to_goal", ["pz1"], goals=[(0.3, 0.0)], timeout=5.0), 0.0)
+    status = loop.step(0.0).status                                # driving: the distance to the goal is known
+    for k in range(1, 11):                                        # then pz2 is pulled back off the anchor
+        loop.on_pose("pz1", 0.1 * k, *front)
+        loop.on_pose("pz2", 0.1 * k, -GEO.body_side - 0.005 * k, 0.0, 0.0)
+        status = loop.step(0.1 * k).status
+        if status.state == FAILED:
+            break
+    assert status.request_id == rid and status.state == FAILED and "lost" in status.message
+
+
 def test_a_lead_that_passes_its_goal_fails_at_once():
     loop = ControlLoop(["pz1"], replace(KINEMATIC, assembly_turn_rate=1e-6))   # a lead that cannot turn
     plant = Plant(loop, {"pz1": (0.0, 0.0, 0.0)})

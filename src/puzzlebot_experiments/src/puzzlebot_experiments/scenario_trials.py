@@ -108,6 +108,9 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
                 state, message, elapsed = cl.run_behavior(req, limit)
             except RuntimeError as e:          # a pose the pose gate rejects (a robot fell off a stage): the
                 state, message, elapsed = FAILED, "pose rejected: %s" % e, cl.time - t0    # trial fails there
+            except Exception as e:             # a bug in the stack: this trial fails and says so, the sweep goes on
+                state, message, elapsed = "error", "error in the stack: %s: %s" % (type(e).__name__, e), \
+                    cl.time - t0
             coupled = sorted(cl.loop.pairs.coupled)
             problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
             step_ok = state == SUCCEEDED and not problems

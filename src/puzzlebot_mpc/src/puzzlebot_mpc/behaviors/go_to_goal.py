@@ -61,8 +61,8 @@ class GoToGoal(Behavior):
         if self.first_errors is None and errors and all(e == e for e in errors):
             self.first_errors = list(errors)             # the distances when it started
         first = self.first_errors
-        if first is None or not all(e == e for e in errors):
-            return float("nan")
+        if first is None or len(errors) != len(first) or not all(e == e for e in errors):
+            return float("nan")              # unknown (no poses, or a failure's Progress without distances)
         done = [1.0 if e <= tol or e0 <= tol else min(1.0, max(0.0, (e0 - e) / (e0 - tol)))
                 for e, e0 in zip(errors, first)]
         return sum(done) / len(done)
