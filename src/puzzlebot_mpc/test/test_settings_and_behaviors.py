@@ -95,11 +95,9 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
 
     far = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.15, 0.0, 0.0)}
     m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=far)
-    mask = step(0.1, far)
+    assert (step(0.1, far) == 0.0).all()                               # lining up: both move
     (pair,) = m.pairs.active
     a, o = pair.robot_i, pair.robot_j                                  # o docks (the opening robot)
-    assert mask[m.index[o]] == pytest.approx([0.0, 0.0])              # lining up: the mover drives ...
-    assert mask[m.index[a]] == pytest.approx([math.sqrt(settings.hold_scale), 0.0])  # ... a turns in place
     inside = {a: (0.0, 0.0, 0.0), o: (-m.geometry.body_side - 0.008, 0.0, 0.0)}   # head 8 mm in
     mask = step(0.2, inside)
     assert pair.status == 1                                            # head_aligned
@@ -116,14 +114,27 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
     assert not [p for p in obj.pairs if p.active]
 
 
-def test_a_seed_pairs_holder_drives_too_when_told():
-    m = BehaviorManager(["pz1", "pz2"], MPCSettings(seed_holder_turns=False))
+def test_a_seed_pairs_holder_only_turns_with_another_robot_close_by():
+    """The MPC keeps no robots apart: a holder that drove to line up would run into its neighbour."""
+    settings = MPCSettings()
     far = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.15, 0.0, 0.0)}
-    m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=far)
-    m.pairs.update(far, 0.1)
-    m.update(0.1, far)
-    m.pairs.assign_active(far)
-    assert (m.objectives(0.1, far).velocity_mask == 0.0).all()         # lining up: both robots drive
+
+    def holder_mask(neighbour, clearance=settings.seed_holder_clearance):
+        m = BehaviorManager(["pz1", "pz2", "pz3"], replace(settings, seed_holder_clearance=clearance))
+        poses = dict(far, pz3=neighbour)
+        m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=poses)
+        m.pairs.update(poses, 0.1)
+        m.update(0.1, poses)
+        m.pairs.assign_active(poses)
+        (pair,) = m.pairs.active
+        mask = m.objectives(0.1, poses).velocity_mask
+        assert pair.robot_j == "pz2" and mask[m.index["pz2"]] == pytest.approx([0.0, 0.0])   # pz2 docks
+        return mask[m.index["pz1"]]
+
+    in_front = (settings.seed_holder_clearance - 0.01, 0.0, 0.0)     # pz3 just inside the clearance of pz1
+    assert holder_mask(in_front) == pytest.approx([math.sqrt(settings.hold_scale), 0.0])   # pz1 only turns
+    assert holder_mask((0.5, 0.5, 0.0)) == pytest.approx([0.0, 0.0])                      # nobody near: drives
+    assert holder_mask(in_front, clearance=0.0) == pytest.approx([0.0, 0.0])              # 0: always drives
 
 
 # ------------------------------------------------- decouple: the partner turns the other way

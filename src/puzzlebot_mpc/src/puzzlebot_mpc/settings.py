@@ -103,7 +103,8 @@ class MPCSettings:
     decouple_settle_speed: float = 0.01  # m/s: after the release both robots push back into their assemblies ...
     decouple_settle_time: float = 1.5    # s: ... for this long (re-seats the neighbours' anchors the wiggle bent)
     decouple_confirm_steps: int = 3  # consecutive control steps the release must be seen
-    seed_holder_turns: bool = True   # a seed pair's holder turns in place to line up (false: it drives too)
+    seed_holder_clearance: float = 0.15  # m: a seed pair's holder only turns (its speed held) while another robot
+                                     # stands this close to it, centre to centre (0: it always drives too)
     assembly_seeds: int = 1          # sub-assemblies a couple forms at once in each target (0: every seed
                                      # that can go; pairs.PairBook)
     # docking an anchor pair and proving it seated (puzzlebot_mpc/docking.py; dock_* = DockingSettings fields)
@@ -175,7 +176,8 @@ class MPCSettings:
                     "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",
-                    "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral"):
+                    "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral",
+                    "seed_holder_clearance"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
         if self.constraint_horizon > self.horizon:

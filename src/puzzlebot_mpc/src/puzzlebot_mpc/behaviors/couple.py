@@ -136,7 +136,8 @@ class Couple(Behavior):
         (sent as is) and the rest of its assembly the rigid-body speeds that go with it; the pair's
         alignment cost is off (the manager marks it inactive).
 
-        A seed pair (two single robots) lines up with both robots moving; once its anchor head is in the
+        A seed pair (two single robots) lines up with both robots moving (the partner only turning when
+        another robot stands within ``seed_holder_clearance``); once its anchor head is in the
         opening (head_aligned) the partner holds still while the mover pushes the anchor home (otherwise
         the partner gives way and the pair drives off together, into the robots around it). A pair inside
         one assembly (closing a loop) holds on both sides.
@@ -157,8 +158,8 @@ class Couple(Behavior):
             seed = len(mg) == len(hg) == 1
             for m in hg:
                 free = seed and not driven and p.status != pr.HEAD_ALIGNED
-                obj.velocity_mask[ctx.index[m]] = ((hold, 0.0) if self.settings.seed_holder_turns else 0.0) \
-                    if free else hold
+                turn_only = free and self.crowded(m, p.robots, poses)
+                obj.velocity_mask[ctx.index[m]] = (hold, 0.0) if turn_only else 0.0 if free else hold
             if not driven:
                 for m in mg:
                     obj.velocity_mask[ctx.index[m]] = 0.0
@@ -173,6 +174,15 @@ class Couple(Behavior):
             for m in mg:
                 obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
             obj.open_loop[ctx.index[m_robot]] = (cmd.v, cmd.w)
+
+    def crowded(self, robot, pair_robots, poses):
+        """True when a robot outside ``pair_robots`` stands within ``seed_holder_clearance`` [m] of ``robot``
+        (centre to centre): a seed pair's holder then only turns, since the MPC keeps no robots apart."""
+        clearance, here = self.settings.seed_holder_clearance, poses.get(robot)
+        if here is None or clearance <= 0:
+            return False
+        return any(q is not None and n not in pair_robots and math.hypot(q[0] - here[0], q[1] - here[1]) < clearance
+                   for n, q in poses.items())
 
     def driven_pairs(self):
         """Keys of the active pairs the docking manoeuvre drives this step (their alignment cost is off)."""
