@@ -41,6 +41,19 @@ def test_summary_counts_steps_reached_and_passed():
     assert (s["pairs_held"], s["pairs_not_seated"]) == (15, 1)
     assert [(x["reached"], x["succeeded"]) for x in s["steps"]] == [(2, 2), (2, 1), (1, 1)]
     assert "| couple all robots into line | 2 | 2 | 10.0 | 10.0 |" in format_table(s)
+    assert s["not_seated_by"] == {"not told": 1}          # a record written before the reasons were kept
+
+
+def test_summary_counts_why_pairs_were_not_seated():
+    steps = scenario_steps(SCENARIOS, "couple4_line")
+    problems = ["pz1-pz2 not seated (barb R folded into the mouth (3.7 mm off the axis, the lips at 4.2 mm))",
+                "pz2-pz3 not seated (barb L on the lip; barb R folded into the mouth (3.1 mm ...))",
+                "pz3-pz4 not seated (barb L folded into the mouth (2.0 mm ...))",
+                "pz1's anchor out of its holder (x 3.0 mm, yaw 0.10 rad)"]
+    bad = {"behavior": "x", "ok": False, "sim_seconds": 10.0, "problems": problems, "coupled_pairs": 3}
+    s = summarize([{"trial": 0, "success": False, "steps": [bad], "failed_mpc_steps": 0}], steps)
+    assert s["pairs_not_seated"] == 3
+    assert s["not_seated_by"] == {"a barb folded into the mouth": 2, "a barb on the lip": 1}
 
 
 def test_timeline_plot_is_written(tmp_path):

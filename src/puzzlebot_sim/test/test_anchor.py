@@ -6,7 +6,7 @@ import pytest
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
-from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify, classify_knob
+from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify, classify_knob, unseated_reason
 from puzzlebot_sim.params import AnchorParams, RobotParams
 
 
@@ -78,6 +78,20 @@ def test_classify_coupling_states():
     assert classify(*points(*too_high), p) == DECOUPLED
     in_lock_slot = ((h - 0.012, 0.0, z + p.mouth_height / 2 + 0.003), seated[1])
     assert classify(*points(*in_lock_slot), p) == HEAD_INSERTED
+
+
+def test_why_an_anchor_in_the_opening_is_not_seated():
+    p = RobotParams()
+    h, z = p.body_side / 2, p.opening_z
+    head = (h - 0.012, 0.0, z)
+    assert unseated_reason(*points(head, [(h - 0.006, 0.006, z), (h - 0.006, -0.006, z)]), p) == ""
+    folded = unseated_reason(*points(head, [(h - 0.006, 0.0037, z), (h - 0.006, -0.0092, z)]), p)   # traced, line8
+    assert folded.startswith("barb L folded into the mouth (3.7 mm off the axis") and "R" not in folded
+    on_lip = unseated_reason(*points((h - 0.005, 0.0, z), [(h - 0.001, 0.006, z), (h - 0.006, -0.006, z)]), p)
+    assert on_lip == "barb L on the lip"
+    out = unseated_reason(*points((h - 0.005, 0.0, z), [(h + 0.004, 0.006, z), (h + 0.004, -0.006, z)]), p)
+    assert out == "barb L outside the opening; barb R outside the opening"
+    assert unseated_reason(*points((h + 0.003, 0.0, z), [(h + 0.01, 0.006, z)] * 2), p) == ""   # not in it
 
 
 def test_classify_knob_states():

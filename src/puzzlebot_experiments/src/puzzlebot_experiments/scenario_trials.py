@@ -52,8 +52,13 @@ def request_of(step):
 
 def physical_problems(cl, step, coupled, body_side):
     """What Bullet contradicts after ``step`` (a list of short texts; empty: it agrees)."""
-    physical = cl.physical()
-    problems = ["%s-%s not seated" % key for key in coupled if physical.get(key, 0) != HEAD_INSERTED]
+    found = {(p.anchor_robot, p.opening_robot): p for p in cl.world.all_physical_pairs()}
+    physical = {key: p.status for key, p in found.items()}
+    problems = []
+    for key in coupled:
+        if physical.get(key, 0) != HEAD_INSERTED:
+            reason = found[key].reason if key in found else "the anchor not in the opening"
+            problems.append("%s-%s not seated%s" % (key + (" (%s)" % reason if reason else "",)))
     if step.behavior == "decouple":
         a, b = step.pair
         if max(physical.get((a, b), 0), physical.get((b, a), 0)) >= HEAD_ALIGNED:
@@ -136,10 +141,24 @@ def run_task(task):
     return run_trial(directory, scenario, seed, trial, overrides=task[4] if len(task) > 4 else None)
 
 
+#: why Bullet found a pair the controller held coupled not seated (summarize's ``not_seated_by``)
+UNSEATED_KINDS = (("folded into the mouth", "a barb folded into the mouth"), ("on the lip", "a barb on the lip"),
+                  ("outside the opening", "a barb outside the opening"),
+                  ("not in the opening", "the anchor not in the opening"))
+
+
+def unseated_kind(problem):
+    """The kind (UNSEATED_KINDS) of a "... not seated (reason)" problem text, by its first reason; "not told"
+    for records written before the reasons were recorded."""
+    found = [(problem.find(key), kind) for key, kind in UNSEATED_KINDS if key in problem]
+    return min(found)[1] if found else "not told"
+
+
 def summarize(records, scenario_steps):
     """trials, successes, and per step: how many trials got through it and its median time [s]; pairs_held:
     the pairs the controller held coupled at the end of a step, summed over every step of every trial, and
-    pairs_not_seated: how many of them Bullet found not seated (the controller's belief against the physics)."""
+    pairs_not_seated: how many of them Bullet found not seated (the controller's belief against the physics),
+    not_seated_by: those counted by why (:func:`unseated_kind`, the first barb's reason)."""
     per_step = []
     for k, step in enumerate(scenario_steps):
         done = [r["steps"][k] for r in records if len(r["steps"]) > k]
@@ -148,9 +167,12 @@ def summarize(records, scenario_steps):
                          "median_s": round(float(np.median([s["sim_seconds"] for s in ok])), 2) if ok else None,
                          "max_s": round(max(s["sim_seconds"] for s in ok), 2) if ok else None})
     held = sum(st.get("coupled_pairs", 0) for r in records for st in r["steps"])
-    not_seated = sum(1 for r in records for st in r["steps"] for p in st.get("problems", []) if "not seated" in p)
+    unseated = [p for r in records for st in r["steps"] for p in st.get("problems", []) if "not seated" in p]
+    by = {}
+    for p in unseated:
+        by[unseated_kind(p)] = by.get(unseated_kind(p), 0) + 1
     return {"trials": len(records), "successes": sum(r["success"] for r in records),
-            "pairs_held": held, "pairs_not_seated": not_seated,
+            "pairs_held": held, "pairs_not_seated": len(unseated), "not_seated_by": by,
             "failed_trials": sorted(r["trial"] for r in records if not r["success"]),
             "failed_mpc_steps": int(sum(r["failed_mpc_steps"] for r in records)), "steps": per_step}
 

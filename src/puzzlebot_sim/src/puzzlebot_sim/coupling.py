@@ -35,6 +35,7 @@ class PhysicalPair:
     opening_robot: str
     status: int
     knob: bool = False     # a knob-hole pair: anchor_robot carries the knob, opening_robot has the hole
+    reason: str = ""       # an anchor not seated: why (unseated_reason)
 
     @property
     def status_name(self):
@@ -66,6 +67,35 @@ def classify(head_tip, barb_tips, rp, tolerance=0.0005):
     seated = all(_in_opening(t, rp, tolerance) and t[0] < behind_lips
                  and abs(t[1]) >= rp.mouth_width / 2.0 - tolerance for t in barb_tips)
     return HEAD_INSERTED if seated else HEAD_ALIGNED
+
+
+def unseated_reason(head_tip, barb_tips, rp, tolerance=0.0005):
+    """Why an anchor in an opening is not seated (classify's HEAD_ALIGNED): one short text per barb that is
+    not, joined by "; " ("" when seated or not in the opening). Points as for :func:`classify`.
+
+    - "barb L folded into the mouth": its tip behind the lips but closer to the axis than the lips' inner
+      edges (a pull draws it out through the mouth);
+    - "barb L on the lip": its tip not behind the lips, but within the cavity's width;
+    - "barb L outside the opening" otherwise (in front of the face, beside or above the slit).
+    Barbs are named L (+y) and R (-y) by which side of the opening's axis their tip is on.
+    """
+    if not _in_opening(head_tip, rp, tolerance):
+        return ""
+    behind_lips = rp.body_side / 2.0 - rp.lip_depth + tolerance
+    out = []
+    for t in barb_tips:
+        side = "L" if t[1] >= 0 else "R"
+        inside, behind = _in_opening(t, rp, tolerance), t[0] < behind_lips
+        if inside and behind and abs(t[1]) >= rp.mouth_width / 2.0 - tolerance:
+            continue
+        if inside and behind:
+            out.append("barb %s folded into the mouth (%.1f mm off the axis, the lips at %.1f mm)"
+                       % (side, 1e3 * abs(t[1]), 1e3 * rp.mouth_width / 2.0))
+        elif inside or (t[0] < rp.body_side / 2.0 + tolerance and abs(t[1]) <= rp.slit_width / 2.0 + tolerance):
+            out.append("barb %s on the lip" % side)
+        else:
+            out.append("barb %s outside the opening" % side)
+    return "; ".join(out)
 
 
 def classify_knob(knob_centre, rp, tolerance=0.001):

@@ -521,7 +521,7 @@ class SimWorld(BulletSession):
     def physical_pairs(self, include_decoupled=False):
         """Anchor-opening pairs read off the simulated bodies (see puzzlebot_sim.coupling).
 
-        Returns PhysicalPair(anchor_robot, opening_robot, status) for every
+        Returns PhysicalPair(anchor_robot, opening_robot, status, reason) for every
         anchor whose head is in another robot's opening (sorted by names);
         with ``include_decoupled`` also the near pairs that are not.
         """
@@ -548,7 +548,8 @@ class SimWorld(BulletSession):
                          for q in points]
                 status = coupling.classify(local[0], local[1:], p)
                 if status != coupling.DECOUPLED or include_decoupled:
-                    out.append(coupling.PhysicalPair(a_name, o_name, status))
+                    reason = coupling.unseated_reason(local[0], local[1:], p) if status == coupling.HEAD_ALIGNED else ""
+                    out.append(coupling.PhysicalPair(a_name, o_name, status, reason=reason))
         return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
 
     def all_physical_pairs(self):
