@@ -17,6 +17,8 @@ A step counts only when the behaviour succeeded *and* Bullet agrees:
 A trial succeeds when every step does; it stops at the first failed step.
 """
 
+from collections import Counter
+
 import numpy as np
 import yaml
 
@@ -26,7 +28,7 @@ from puzzlebot_common.robots import parse_robot_list
 from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
-from puzzlebot_sim.coupling import HEAD_ALIGNED, HEAD_INSERTED
+from puzzlebot_sim.coupling import BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD_ALIGNED, HEAD_INSERTED
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
 from puzzlebot_sim.config import load_sim_config
 from puzzlebot_sim.world import RobotStart
@@ -36,6 +38,7 @@ from puzzlebot_bringup.scenario import parse_scenario
 
 SETTLE = 2.0     # s of simulated time a step may run past its own timeout before it counts as hung
 SETTLE_AT_START = 0.3  # s the robots settle on the floor before the first step
+NOT_IN_OPENING = "the anchor not in the opening"
 
 
 def world_seed(seed, trial):
@@ -57,7 +60,7 @@ def physical_problems(cl, step, coupled, body_side):
     problems = []
     for key in coupled:
         if physical.get(key, 0) != HEAD_INSERTED:
-            reason = found[key].reason if key in found else "the anchor not in the opening"
+            reason = found[key].reason if key in found else NOT_IN_OPENING
             problems.append("%s-%s not seated%s" % (key + (" (%s)" % reason if reason else "",)))
     if step.behavior == "decouple":
         a, b = step.pair
@@ -142,9 +145,8 @@ def run_task(task):
 
 
 #: why Bullet found a pair the controller held coupled not seated (summarize's ``not_seated_by``)
-UNSEATED_KINDS = (("folded into the mouth", "a barb folded into the mouth"), ("on the lip", "a barb on the lip"),
-                  ("outside the opening", "a barb outside the opening"),
-                  ("not in the opening", "the anchor not in the opening"))
+UNSEATED_KINDS = tuple((words, "a barb " + words) for words in (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE)) + (
+    (NOT_IN_OPENING, NOT_IN_OPENING),)
 
 
 def unseated_kind(problem):
@@ -168,9 +170,7 @@ def summarize(records, scenario_steps):
                          "max_s": round(max(s["sim_seconds"] for s in ok), 2) if ok else None})
     held = sum(st.get("coupled_pairs", 0) for r in records for st in r["steps"])
     unseated = [p for r in records for st in r["steps"] for p in st.get("problems", []) if "not seated" in p]
-    by = {}
-    for p in unseated:
-        by[unseated_kind(p)] = by.get(unseated_kind(p), 0) + 1
+    by = dict(Counter(unseated_kind(p) for p in unseated))
     return {"trials": len(records), "successes": sum(r["success"] for r in records),
             "pairs_held": held, "pairs_not_seated": len(unseated), "not_seated_by": by,
             "failed_trials": sorted(r["trial"] for r in records if not r["success"]),

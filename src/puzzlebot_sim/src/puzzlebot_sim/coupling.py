@@ -55,6 +55,21 @@ def _in_opening(p, rp, tolerance):
     return -rp.mouth_height / 2.0 - tolerance <= dz <= top + tolerance
 
 
+#: why a barb tip is not seated (unseated_reason's words)
+BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE = "folded into the mouth", "on the lip", "outside the opening"
+
+
+def _barb_fault(tip, rp, tolerance):
+    """None when a barb tip (opening robot's base_link [m]) is seated: in the slits, behind the lips and
+    outside the mouth; else BARB_FOLDED, BARB_ON_LIP or BARB_OUTSIDE."""
+    inside, behind = _in_opening(tip, rp, tolerance), tip[0] < rp.body_side / 2.0 - rp.lip_depth + tolerance
+    if inside and behind:
+        return None if abs(tip[1]) >= rp.mouth_width / 2.0 - tolerance else BARB_FOLDED
+    if inside or (tip[0] < rp.body_side / 2.0 + tolerance and abs(tip[1]) <= rp.slit_width / 2.0 + tolerance):
+        return BARB_ON_LIP
+    return BARB_OUTSIDE
+
+
 def classify(head_tip, barb_tips, rp, tolerance=0.0005):
     """Status of an anchor whose head tip and barb tip centres are given in the
     opening robot's base_link (x, y, z) [m]; ``rp``: that robot's RobotParams.
@@ -63,9 +78,7 @@ def classify(head_tip, barb_tips, rp, tolerance=0.0005):
     """
     if not _in_opening(head_tip, rp, tolerance):
         return DECOUPLED
-    behind_lips = rp.body_side / 2.0 - rp.lip_depth + tolerance
-    seated = all(_in_opening(t, rp, tolerance) and t[0] < behind_lips
-                 and abs(t[1]) >= rp.mouth_width / 2.0 - tolerance for t in barb_tips)
+    seated = all(_barb_fault(t, rp, tolerance) is None for t in barb_tips)
     return HEAD_INSERTED if seated else HEAD_ALIGNED
 
 
@@ -81,20 +94,15 @@ def unseated_reason(head_tip, barb_tips, rp, tolerance=0.0005):
     """
     if not _in_opening(head_tip, rp, tolerance):
         return ""
-    behind_lips = rp.body_side / 2.0 - rp.lip_depth + tolerance
     out = []
     for t in barb_tips:
-        side = "L" if t[1] >= 0 else "R"
-        inside, behind = _in_opening(t, rp, tolerance), t[0] < behind_lips
-        if inside and behind and abs(t[1]) >= rp.mouth_width / 2.0 - tolerance:
+        fault = _barb_fault(t, rp, tolerance)
+        if fault is None:
             continue
-        if inside and behind:
-            out.append("barb %s folded into the mouth (%.1f mm off the axis, the lips at %.1f mm)"
-                       % (side, 1e3 * abs(t[1]), 1e3 * rp.mouth_width / 2.0))
-        elif inside or (t[0] < rp.body_side / 2.0 + tolerance and abs(t[1]) <= rp.slit_width / 2.0 + tolerance):
-            out.append("barb %s on the lip" % side)
-        else:
-            out.append("barb %s outside the opening" % side)
+        text = "barb %s %s" % ("L" if t[1] >= 0 else "R", fault)
+        if fault == BARB_FOLDED:
+            text += " (%.1f mm off the axis, the lips at %.1f mm)" % (1e3 * abs(t[1]), 1e3 * rp.mouth_width / 2.0)
+        out.append(text)
     return "; ".join(out)
 
 
