@@ -62,10 +62,33 @@ def test_rejects_bad_samples_and_restarts_after_a_gap():
     assert "non-finite" in est.update(1.01, float("nan"), 0.0, 0.0)
     assert "not after" in est.update(1.0, 0.001, 0.0, 0.0)      # duplicate stamp
     assert "not after" in est.update(0.99, 0.001, 0.0, 0.0)     # out of order
-    assert est.update(1.01, 0.0005, 0.0, 0.0) is None
+    for k in range(1, 5):
+        assert est.update(1.0 + 0.01 * k, 0.0005 * k, 0.0, 0.0) is None
+        assert est.velocity() is None                   # 10..40 ms of poses: less than the window
+    assert est.update(1.05, 0.0025, 0.0, 0.0) is None
     assert est.velocity() == pytest.approx((0.05, 0.0))
     # 0.5 s hidden, then 0.05 m further: no fake 0.1 m/s averaged over the gap
-    assert est.update(1.51, 0.0505, 0.0, 0.0) is None
+    assert est.update(1.55, 0.0525, 0.0, 0.0) is None
     assert est.velocity() is None
-    assert est.update(1.52, 0.0510, 0.0, 0.0) is None
+    for k in range(1, 6):
+        assert est.velocity() is None
+        assert est.update(1.55 + 0.01 * k, 0.0525 + 0.0005 * k, 0.0, 0.0) is None
     assert est.velocity() == pytest.approx((0.05, 0.0))
+
+
+def test_first_estimate_after_a_restart_spans_the_window():
+    """Resuming after a gap, the first estimate is a full-window difference: its error from 0.3 mm
+    pose noise and 2 ms stamp jitter stays that of the window, not five times it (two poses 10 ms apart)."""
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    for trial in range(200):
+        est = VelocityEstimator(0.05, 0.03, 0.2)
+        t = 0.0
+        while est.velocity() is None:
+            x, y, th = unicycle_arc((0, 0, 0), 0.04, 0.3, t)
+            stamp = t + rng.uniform(-0.002, 0.002)
+            est.update(stamp, x + rng.normal(0, 3e-4), y + rng.normal(0, 3e-4), th + rng.normal(0, 3e-3))
+            t += 0.01
+        assert t >= 0.05
+        worst = max(worst, abs(est.velocity()[0] - 0.04))
+    assert worst < 0.04         # m/s: 0.025 here; the first pose pair 10 ms apart gave 0.13 m/s

@@ -65,9 +65,17 @@ class Mocap:
         self._thread.join(timeout=2.0)
 
     def _run(self):
-        t_next = time.monotonic()
+        # Frames are stamped on the grid of multiples of the period (wall time), as a Vicon stamps its
+        # frames, and each grid instant gets its frame: a thread that falls behind on a loaded machine
+        # publishes the frames it owes, late but with their own stamps, instead of skipping instants
+        # (a one-frame fault of FaultPlan.every_fault lies between two grid instants and would be
+        # lost) or stamping at irregular times (the plant moves by 1/rate per frame).
+        k = math.ceil(time.time() * self.rate)
         while not self._stop.is_set():
-            t = time.time()
+            t = k / self.rate
+            wait = t - time.time()
+            if wait > 0:
+                time.sleep(wait)
             for name, pose in self.step(t, 1.0 / self.rate):
                 frame = self.plan.frame(name, t, *pose)
                 if frame is None:
@@ -75,8 +83,7 @@ class Mocap:
                 self.pubs[name].publish(frame_msg(name, frame))
                 if self.plan.fault(name, t) is None:
                     self.good[name].append(t)
-            t_next += 1.0 / self.rate
-            time.sleep(max(0.0, t_next - time.monotonic()))
+            k += 1
 
 
 class UnicyclePlant:

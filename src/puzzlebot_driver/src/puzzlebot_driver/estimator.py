@@ -14,6 +14,12 @@ The raw estimate then goes through a first-order low-pass filter of time
 constant ``tau`` (stamps give its step). A gap in the stream longer than
 ``max_gap`` restarts the estimate, so a robot that was hidden does not get a
 velocity averaged over the gap.
+
+There is no estimate until the poses span the whole ``window`` (at the
+start and after every restart): a difference over two poses 10 ms apart
+carries five times the noise and stamp jitter of the full window, and the
+velocity loop's feedback on it kicked a robot resuming after a gap. Until
+then the loop runs on feed-forward alone.
 """
 
 import math
@@ -56,10 +62,10 @@ class VelocityEstimator:
         self._poses.append((stamp, x, y, yaw))
         while len(self._poses) > 2 and stamp - self._poses[1][0] >= self.window:
             self._poses.popleft()
-        if len(self._poses) < 2:
-            return None
         t0, x0, y0, th0 = self._poses[0]
         dt = stamp - t0
+        if dt < self.window * (1.0 - 1e-6):
+            return None              # not a full window yet: no estimate
         dth = wrap_angle(yaw - th0)
         mid = th0 + 0.5 * dth
         forward = (x - x0) * math.cos(mid) + (y - y0) * math.sin(mid)
@@ -81,7 +87,7 @@ class VelocityEstimator:
         return None
 
     def velocity(self):
-        """Latest filtered (v, w), or None before two poses arrived."""
+        """Latest filtered (v, w), or None until the poses span the full window."""
         if self._v is None:
             return None
         return self._v, self._w
