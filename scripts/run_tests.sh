@@ -29,5 +29,9 @@ if [ "$what" = all ] || [ "$what" = ros ]; then
   scripts/env.sh catkin_test_results "$results" || status=1
 fi
 
+if [ $status -ne 0 ]; then
+  echo "== what the failed tests said"
+  scripts/env.sh python scripts/test_failures.py "$results" || true
+fi
 echo "== test suite $( [ $status -eq 0 ] && echo PASSED || echo FAILED ) in $(( $(date +%s) - t0 )) s"
 exit $status

@@ -25,6 +25,10 @@ Checks after each step (private parameters of the test node select them):
 - ~max_failed_solves (default -1 = not checked): at most this many failed MPC steps from the
   first step on.
 
+A failed check's message ends with the lockstep waits that ran out (the sim's "running on", the
+MPC's "stepping on older ones" on /rosout): after one, the run is no longer the seed's, so such a
+failure says the machine stalled, not that the seed's run changed.
+
 The steps are sent as one script (Runner.run_steps: each queued behind the one before), so in
 lockstep the run is the same for a given sim seed whatever the timing of the graph; each check
 reads the messages stamped at the control step that ended its step.
@@ -42,6 +46,7 @@ import tf2_ros
 from puzzlebot_common import names
 from puzzlebot_common.geometry import RobotGeometry, yaw_from_quaternion
 from puzzlebot_common.node_utils import get_param, robot_list_from_param
+from puzzlebot_common.rostest_lab import NodeLog
 from puzzlebot_msgs.msg import ConnectionPair
 from puzzlebot_bringup.runner import SETTLE, Runner
 from puzzlebot_bringup.scenario import parse_scenario
@@ -51,6 +56,7 @@ ALIGNED = ConnectionPair.STATUS_HEAD_ALIGNED
 WALL_LIMIT = 600.0   # s (wall), only so that a hung graph cannot hang the test
 DRIVE_TOLERANCE = 0.002  # m: the MPC stops at the distance on its own noisy poses, the test measures on its copy
 ANCHOR_YAW_MAX = 1.0     # rad: an anchor turned further in its holder has flipped round (holder play +/-0.5)
+LOCKSTEP_LOST = (": running on", "stepping on older ones")   # the sim's and the MPC's warnings of a wait that ran out
 
 
 def anchor_key(p):
@@ -82,12 +88,21 @@ class ScenarioTest(unittest.TestCase):
         self.geometry = RobotGeometry()
         self.tf = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf)
+        self.sim_log, self.mpc_log = NodeLog("/sim"), NodeLog("/mpc")
         self.runner = Runner(self.robots)
         self.assertTrue(self.runner.connect(), "the MPC never solved a step (no poses?)")
         self.wall_deadline = time.monotonic() + WALL_LIMIT
 
     def log(self, text):
         print("[%s] %s" % (self.scenario.name, text), flush=True)
+
+    def lockstep_lost(self):
+        """The lockstep warnings logged so far: (node, text) of every wait that ran out."""
+        out = []
+        for node, log in (("sim", self.sim_log), ("mpc", self.mpc_log)):
+            with log.lock:
+                out += [(node, text) for _, text in log.lines if any(k in text for k in LOCKSTEP_LOST)]
+        return out
 
     def physical_coupled(self):
         return coupled(self.runner.physical)
@@ -171,6 +186,17 @@ class ScenarioTest(unittest.TestCase):
 
     # ----------------------------------------------------------------- test
     def test_scenario(self):
+        try:
+            self.run_scenario()
+        except AssertionError as e:
+            lost = self.lockstep_lost()
+            if not lost:
+                raise
+            raise AssertionError("%s\n(a lockstep wait ran out before this (%d warning(s), throttled), so the "
+                                 "run was not the seed's; first: %s: %s)" % (e, len(lost), lost[0][0], lost[0][1])) \
+                from None
+
+    def run_scenario(self):
         self.log("%d step(s), robots %s, physical checks %s" % (len(self.scenario.steps), self.names,
                                                                 "on" if self.physical else "off (no Bullet)"))
         sim0 = rospy.get_time()
@@ -202,7 +228,8 @@ class ScenarioTest(unittest.TestCase):
             self.check_anchors_in_holders()
         failed = [t for t in self.runner.failed_stamps if t_first is not None and t >= t_first - 1e-6]
         self.log("passed in %.1f s simulated; %d failed MPC step(s) from the first step on (%d in all, "
-                 "e.g. before the first poses)" % (rospy.get_time() - sim0, len(failed), self.runner.failed_solves))
+                 "e.g. before the first poses); %d lockstep warning(s) of a wait that ran out"
+                 % (rospy.get_time() - sim0, len(failed), self.runner.failed_solves, len(self.lockstep_lost())))
         if self.max_failed_solves >= 0:
             self.assertLessEqual(len(failed), self.max_failed_solves, "failed MPC steps at t = %s" % failed[:5])
 

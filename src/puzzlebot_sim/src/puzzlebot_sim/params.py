@@ -340,8 +340,9 @@ class SimParams:
     sync_period: float = CONTROL_PERIOD  # s, the controller's period (the MPC's dt)
     sync_timeout: float = 10.0       # s (wall) to wait for the controller before going on
     sync_startup_timeout: float = 60.0  # s (wall) to wait for the controller's first message
-    sync_cmd_timeout: float = 1.0    # s (wall), then for the cmd_vel of every robot the controller commanded the
-    #                                  period before (cmd_vel and the sync message travel on separate connections)
+    sync_cmd_timeout: float = 10.0   # s (wall), then for the cmd_vel of every robot the controller commanded the
+    #                                  period before (cmd_vel and the sync message travel on separate connections;
+    #                                  as long as sync_timeout: a stalled machine must not make a run differ)
     world: str = "flat"              # flat | step | gap (puzzlebot_sim.worlds)
     gui: bool = False                # the PyBullet GUI (default: DIRECT, no window)
     seed: int = 0                    # mocap noise and dropouts
