@@ -32,10 +32,9 @@ def failures(root):
 def main(argv):
     root = argv[1] if len(argv) > 1 else "build/test_results"
     max_lines = int(argv[2]) if len(argv) > 2 else 40
-    found = list(failures(root))
-    for path, case, kind, text, out in found:
+    for path, case, kind, text, out in failures(root):
         lines = text.strip().splitlines()
-        print("-- %s %s (%s)" % (kind.upper(), case, path.relative_to(root) if path.is_relative_to(root) else path))
+        print("-- %s %s (%s)" % (kind.upper(), case, path.relative_to(root)))
         for line in lines[:max_lines]:
             print("   " + line)
         if len(lines) > max_lines:

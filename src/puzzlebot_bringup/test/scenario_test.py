@@ -88,7 +88,7 @@ class ScenarioTest(unittest.TestCase):
         self.geometry = RobotGeometry()
         self.tf = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf)
-        self.sim_log, self.mpc_log = NodeLog("/sim"), NodeLog("/mpc")
+        self.rosout = NodeLog("")                      # every node's lines: the lockstep warnings
         self.runner = Runner(self.robots)
         self.assertTrue(self.runner.connect(), "the MPC never solved a step (no poses?)")
         self.wall_deadline = time.monotonic() + WALL_LIMIT
@@ -97,12 +97,9 @@ class ScenarioTest(unittest.TestCase):
         print("[%s] %s" % (self.scenario.name, text), flush=True)
 
     def lockstep_lost(self):
-        """The lockstep warnings logged so far: (node, text) of every wait that ran out."""
-        out = []
-        for node, log in (("sim", self.sim_log), ("mpc", self.mpc_log)):
-            with log.lock:
-                out += [(node, text) for _, text in log.lines if any(k in text for k in LOCKSTEP_LOST)]
-        return out
+        """The lockstep warnings logged so far: the text of every wait that ran out."""
+        with self.rosout.lock:
+            return [text for _, text in self.rosout.lines if any(k in text for k in LOCKSTEP_LOST)]
 
     def physical_coupled(self):
         return coupled(self.runner.physical)
@@ -193,8 +190,7 @@ class ScenarioTest(unittest.TestCase):
             if not lost:
                 raise
             raise AssertionError("%s\n(a lockstep wait ran out before this (%d warning(s), throttled), so the "
-                                 "run was not the seed's; first: %s: %s)" % (e, len(lost), lost[0][0], lost[0][1])) \
-                from None
+                                 "run was not the seed's; first: %s)" % (e, len(lost), lost[0])) from None
 
     def run_scenario(self):
         self.log("%d step(s), robots %s, physical checks %s" % (len(self.scenario.steps), self.names,

@@ -119,7 +119,7 @@ class UnicyclePlant:
 
 
 class NodeLog:
-    """The /rosout lines of the node whose name ends with ``node``, as (stamp [s], text)."""
+    """The /rosout lines of the node whose name ends with ``node`` ("": every node), as (stamp [s], text)."""
 
     def __init__(self, node):
         self.node = node
