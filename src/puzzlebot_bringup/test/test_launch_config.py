@@ -61,6 +61,22 @@ def test_world_comes_from_the_scenario_unless_given():
     assert sim_config(SCENARIOS, "couple2", world="step").world == "step"
 
 
+def test_the_mpc_gets_the_world_the_sim_builds():
+    """The world name and dimensions the launch files give the MPC node (its stage edges) are the sim's."""
+    from dataclasses import asdict
+
+    from puzzlebot_sim.config import load_sim_config
+
+    c = sim_config(SCENARIOS, "bridge_gap")
+    assert c.world == "gap" and c.world_params == asdict(load_sim_config().world)
+    lab_list = os.path.join(HERE, "config", "couple2_lab.yaml")
+    assert lab_config(SCENARIOS, lab_list).world == "flat"
+    assert lab_config(SCENARIOS, lab_list, world="step").world == "step"
+    with pytest.raises(ConfigError) as e:
+        lab_config(SCENARIOS, lab_list, world="moon")
+    assert "world:=moon: unknown world" in str(e.value)
+
+
 def test_a_robot_list_file_sets_pilots_and_must_fit_the_scenario(tmp_path):
     good = tmp_path / "pilots.yaml"
     good.write_text(yaml.safe_dump({"robots": [{"name": "pz1", "pilot": True}, {"name": "pz2"}]}))

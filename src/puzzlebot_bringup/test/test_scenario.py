@@ -156,3 +156,15 @@ def test_bad_group_and_goal_steps_name_the_problem(step, fragment):
     with pytest.raises(ConfigError) as e:
         parse_scenario({"name": "x", "start": {}, "steps": [step]}, FOUR)
     assert fragment in str(e.value)
+
+
+def test_cross_edges_parses_on_moving_steps_only():
+    drive = {"behavior": "drive_assembly", "robots": ["pz1"], "velocity": [0.03, 0.0], "distance": 0.3}
+    steps = parse_scenario({"name": "x", "start": {}, "steps": [dict(drive, cross_edges=True), drive]},
+                           ROBOTS).steps
+    assert steps[0].cross_edges is True and steps[1].cross_edges is False
+    for step, fragment in [(dict(drive, cross_edges="yes"), "cross_edges: expected true or false"),
+                           ({"behavior": "couple", "target": "line", "cross_edges": True}, "do not apply")]:
+        with pytest.raises(ConfigError) as e:
+            parse_scenario({"name": "x", "start": {}, "steps": [step]}, ROBOTS)
+        assert fragment in str(e.value)

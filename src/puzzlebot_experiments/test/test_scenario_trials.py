@@ -127,3 +127,35 @@ def test_an_error_in_the_stack_fails_its_trial_and_says_so(monkeypatch):
     rec = run_trial(SCENARIOS, "couple2", seed=1, trial=0)          # the sweep goes on: a record, no raise
     assert not rec["success"] and len(rec["steps"]) == 1
     assert rec["steps"][0]["state"] == "error" and "ZeroDivisionError" in rec["steps"][0]["message"]
+
+
+EDGE_SCENARIO = """
+robots:
+  - {name: pz1}
+scenario:
+  name: to_the_edge
+  world: step
+  start: {pz1: [-0.15, 0.0, 0.0]}
+  steps:
+    - behavior: follow_velocity
+      velocities: {pz1: [0.05, 0.0]}
+      timeout: 6.0
+"""
+
+
+@pytest.mark.parametrize("cross, edges", [(False, True), (False, False), (True, True)])
+def test_in_bullet_the_stage_edges_keep_a_robot_on_its_stage(tmp_path, cross, edges):
+    """A robot sent towards the step's edge at 0.05 m/s for 6 s (0.3 m, the edge 0.15 m away): on the stage
+    at the end with the MPC's stage edges; over the edge without them (the trial says it left its stage) and
+    with cross_edges (it may: no complaint; a lone robot driven off nose first tips over, its pose is
+    rejected)."""
+    text = EDGE_SCENARIO + ("      cross_edges: true\n" if cross else "")
+    (tmp_path / "to_the_edge.yaml").write_text(text)
+    rec = run_trial(str(tmp_path), "to_the_edge", seed=1, trial=0, overrides={"edges": edges})
+    step = rec["steps"][0]
+    left = any("left its stage" in p for p in step["problems"])
+    if edges and not cross:
+        assert rec["success"] and not step["problems"], step
+    else:
+        assert not rec["success"] and "pose rejected" in step["message"], step    # it went over the edge
+        assert left == (not cross), step

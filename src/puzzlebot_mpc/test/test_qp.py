@@ -69,31 +69,43 @@ CASES = [
 ]
 
 
-def case_problem(case):
-    """Settings (horizon 4, constraint horizon 2 unless the case overrides them) and Structure of CASES[case]."""
+def case_problem(case, edges=False):
+    """Settings (horizon 4, constraint horizon 2 unless the case overrides them) and Structure of CASES[case]
+    (with the edge-box rows: ``edges``)."""
     over, n, pairs = CASES[case]
     s = replace(MPCSettings(horizon=4, constraint_horizon=2), **over)
-    return s, Structure(n, s.horizon, s.constraint_horizon, tuple((p.i, p.j) for p in pairs))
+    return s, Structure(n, s.horizon, s.constraint_horizon, tuple((p.i, p.j) for p in pairs), edges)
 
 
-def random_step_data(rng, case, settings):
-    """A random problem of CASES[case] (random_case) packed as step data, a random butterfly cone per stage."""
+def random_edge_boxes(rng, n):
+    """(n, 4) edge boxes around the origin, some sides without an edge (inf)."""
+    box = np.c_[-rng.uniform(0.0, 0.1, n), rng.uniform(0.0, 0.1, n), -rng.uniform(0.0, 0.1, n),
+                rng.uniform(0.0, 0.1, n)]
+    box = np.where(rng.random((n, 4)) < 0.3, np.array([-1, 1, -1, 1]) * np.inf, box)   # sides without an edge
+    return box
+
+
+def random_step_data(rng, case, settings, edges=False):
+    """A random problem of CASES[case] (random_case) packed as step data, a random butterfly cone per stage
+    (and random edge boxes: ``edges``)."""
     _, n, pairs = CASES[case]
     x0, obj = random_case(rng, n, pairs, settings)
+    if edges:
+        obj.edge_box = random_edge_boxes(rng, n)
     d = pack(settings, x0, obj, pairs)
     d.bsign = rng.choice([-1.0, 1.0], size=d.bsign.shape)
     return d
 
 
-@pytest.mark.parametrize("case", range(len(CASES)))
-def test_qp_data_equal_the_symbolic_reference_on_random_problems(case):
+@pytest.mark.parametrize("case,edges", [(c, False) for c in range(len(CASES))] + [(0, True), (4, True)])
+def test_qp_data_equal_the_symbolic_reference_on_random_problems(case, edges):
     """P, q, every row of A | b (as sets: the row order differs) and the cost equal the CasADi
-    formulation's at random linearisation points, states, objectives and butterfly cones."""
-    s, st = case_problem(case)
+    formulation's at random linearisation points, states, objectives, butterfly cones (and edge boxes)."""
+    s, st = case_problem(case, edges)
     qs = QPStructure(s, st)
     rng = np.random.default_rng(case)
     for _ in range(3):
-        d = random_step_data(rng, case, s)
+        d = random_step_data(rng, case, s, edges)
         zbar = rng.normal(size=qs.lay.nz) * 0.2
         Pr, qr, Ar, br, n_eq, cost = reference_qp(s, st, zbar, d)
         P, q, A, b = qs.original(*qs.assemble(zbar, d))

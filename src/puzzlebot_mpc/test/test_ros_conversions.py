@@ -71,7 +71,9 @@ def test_coupling_request_fields_convert():
     req = SetBehaviorRequest(behavior=SetBehaviorRequest.DRIVE_ASSEMBLY, robots=["pz1"], distance=0.3)
     req.velocities = [twist(0.03, 0.0)]
     core = request_from_srv(round_trip(req))
-    assert core.distance == 0.3 and core.velocities == [(0.03, 0.0)]
+    assert core.distance == 0.3 and core.velocities == [(0.03, 0.0)] and core.cross_edges is False
+    req.cross_edges = True
+    assert request_from_srv(round_trip(req)).cross_edges is True
     assert (SetBehaviorRequest.COUPLE, SetBehaviorRequest.DECOUPLE, SetBehaviorRequest.DRIVE_ASSEMBLY) == (
         behaviors.COUPLE, behaviors.DECOUPLE, behaviors.DRIVE_ASSEMBLY)
 

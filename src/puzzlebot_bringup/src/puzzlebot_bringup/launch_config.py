@@ -17,7 +17,9 @@ Arguments, as the launch files pass them:
 - ``robots`` (lab): the robot list file (required; every robot needs an
   ``ip_octet``); a scenario's robots must all be in it;
 - ``world`` (sim): "" = the scenario's ``world`` (default ``flat``), or a
-  world name of puzzlebot_sim (flat, step, gap);
+  world name of puzzlebot_sim (flat, step, gap); (lab): the stage the robots
+  stand on, "" = ``flat`` (no edges), ``step`` or ``gap`` as built to
+  puzzlebot_sim's config/sim.yaml ``world`` dimensions;
 - ``seed`` (sim): the run's seed; a scenario with ``scatter`` instead of
   ``start`` gets its start poses drawn from it (scenario.scatter_starts),
   so a seed gives the same starts in sim.launch and in scenario_trials;
@@ -26,8 +28,11 @@ Arguments, as the launch files pass them:
   ``config/mocap_NAME.yaml``); an unknown one (``mocap:=vikon``) is refused.
 
 Parts printed (YAML): ``robots`` -> /puzzlebot/robots, ``scenario`` ->
-/puzzlebot/scenario, ``world`` -> the sim node's ``sim/world``; and (URDF)
-``description`` -> /robot_description (``description()``).
+/puzzlebot/scenario, ``world`` -> the sim node's ``sim/world`` and the MPC
+node's ``world``, ``world_params`` (the world's dimensions: puzzlebot_sim's
+config/sim.yaml ``world``, over puzzlebot_common.stages.WorldParams) -> the
+MPC node's ``world_params`` (its stage edges); and (URDF) ``description`` ->
+/robot_description (``description()``).
 """
 
 import glob
@@ -38,6 +43,7 @@ from typing import List
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.robots import parse_robot_list, robot_names
+from puzzlebot_common.stages import WORLD_NAMES
 
 from puzzlebot_bringup.scenario import parse_scenario, scatter_starts
 
@@ -48,7 +54,8 @@ DEFAULT_WORLD = "flat"
 class LaunchConfig:
     robots: List[dict]     # robot list entries (as in a robot list file)
     scenario: dict         # the scenario mapping ({} when there is none)
-    world: str             # sim world ("" for the lab)
+    world: str             # world name (the sim's; the lab's stage, flat by default)
+    world_params: dict     # its dimensions (stages.WorldParams fields)
 
 
 def known_scenarios(directory):
@@ -76,6 +83,14 @@ def _quiet_import(module):
 def known_worlds():
     """World names of puzzlebot_sim."""
     return sorted(_quiet_import("puzzlebot_sim.worlds").WORLDS)
+
+
+def world_params():
+    """The worlds' dimensions as the simulation builds them (puzzlebot_sim's config/sim.yaml ``world``
+    over the defaults), a mapping of stages.WorldParams fields."""
+    from dataclasses import asdict
+
+    return {k: float(v) for k, v in asdict(_quiet_import("puzzlebot_sim.config").load_sim_config().world).items()}
 
 
 def description(config, anchor):
@@ -192,11 +207,15 @@ def sim_config(directory, scenario, robots="", world="", seed=0, mocap=None):
     for w, where in ((world, "world:=%s" % world), (scenario_world, "scenario %s: world" % scenario)):
         if w not in worlds:
             raise ConfigError("%s: unknown world %r; known worlds: %s" % (where, w, ", ".join(worlds)))
-    return LaunchConfig(_entries(specs), sc, world)
+    return LaunchConfig(_entries(specs), sc, world, world_params())
 
 
-def lab_config(directory, robots, scenario=""):
-    """LaunchConfig of lab.launch: the robot list file wins; an optional scenario must fit it."""
+def lab_config(directory, robots, scenario="", world=""):
+    """LaunchConfig of lab.launch: the robot list file wins; an optional scenario must fit it; ``world``: the
+    stage the robots stand on ("" = flat)."""
+    world = world or DEFAULT_WORLD
+    if world not in WORLD_NAMES:
+        raise ConfigError("world:=%s: unknown world; known worlds: %s" % (world, ", ".join(WORLD_NAMES)))
     if not str(robots).strip():
         raise ConfigError("lab.launch needs a robot list: robots:=FILE (e.g. $(find puzzlebot_bringup)"
                           "/config/robots/lab.yaml; name, ip_octet, mocap, pilot per robot)")
@@ -218,4 +237,4 @@ def lab_config(directory, robots, scenario=""):
                               % (scenario, ", ".join(missing), robots, ", ".join(names)))
         sc["start"] = {k: v for k, v in (sc.get("start") or {}).items() if k in names}
         parse_scenario(sc, names, where="scenario %s" % scenario)
-    return LaunchConfig(_entries(specs), sc, "")
+    return LaunchConfig(_entries(specs), sc, world, world_params())

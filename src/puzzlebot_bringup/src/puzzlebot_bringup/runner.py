@@ -53,7 +53,7 @@ def step_goal(step, cls=BehaviorGoal):
     """The request of a scenario Step: a BehaviorGoal (or ``cls``: SetBehaviorRequest has the same fields)."""
     req = cls(behavior=step.behavior, robots=step.robots, tolerance=step.tolerance,
               timeout=step.timeout, target=step.target, pair=step.pair, distance=step.distance,
-              groups=step.groups)
+              groups=step.groups, cross_edges=step.cross_edges)
     req.slots = [Pose2D(x=sl[0], y=sl[1], theta=sl[2]) for sl in step.slots]
     req.goals = [Point(x=g[0], y=g[1], z=0.0) for g in step.goals]
     req.velocities = [twist(v, w) for v, w in step.velocities]

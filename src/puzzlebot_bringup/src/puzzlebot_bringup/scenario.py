@@ -45,6 +45,8 @@ robot list and the scenario::
           velocity: [0.03, 0.0]            # m/s, rad/s in pz1's frame
           distance: 0.3                    # m (or give only a timeout: a duration)
           timeout: 30.0
+          cross_edges: true                # (optional) may leave the stage: down a step, over a gap;
+                                           # without it the MPC keeps every robot on its stage
         - behavior: decouple               # a coupled pair separates (its anchor robot wiggles)
           pair: [pz2, pz3]
           timeout: 60.0
@@ -69,12 +71,14 @@ SCATTER_KEYS = {"rows", "spacing", "lateral", "yaw", "row_spacing", "origin", "h
 SCATTER_SEED_TAG = 0x5CA77E2      # mixed into the run's seed for the scatter's random numbers
 SCATTER_REDRAWS = 200             # draws tried before a scatter that keeps overlapping is an error
 STEP_KEYS = {"behavior", "goals", "velocities", "tolerance", "timeout", "robots", "target", "slots", "pair",
-             "velocity", "distance", "groups"}
+             "velocity", "distance", "groups", "cross_edges"}
 BEHAVIORS = ("go_to_goal", "follow_velocity", "stop", "couple", "decouple", "drive_assembly", "assembly_to_goal")
-_KEYS_OF = {"go_to_goal": {"goals", "tolerance", "timeout"}, "follow_velocity": {"velocities", "timeout"},
+_KEYS_OF = {"go_to_goal": {"goals", "tolerance", "timeout", "cross_edges"},
+            "follow_velocity": {"velocities", "timeout", "cross_edges"},
             "stop": {"timeout"}, "couple": {"robots", "groups", "target", "slots", "timeout"},
-            "decouple": {"pair", "timeout"}, "drive_assembly": {"robots", "velocity", "distance", "timeout"},
-            "assembly_to_goal": {"goals", "tolerance", "timeout"}}
+            "decouple": {"pair", "timeout"},
+            "drive_assembly": {"robots", "velocity", "distance", "timeout", "cross_edges"},
+            "assembly_to_goal": {"goals", "tolerance", "timeout", "cross_edges"}}
 
 
 @dataclass
@@ -90,6 +94,7 @@ class Step:
     pair: List[str] = field(default_factory=list)
     distance: float = 0.0
     groups: List[int] = field(default_factory=list)   # couple: robots per group (consecutive in robots)
+    cross_edges: bool = False                          # its robots may leave their stage
 
     def describe(self):
         if self.behavior in ("go_to_goal", "assembly_to_goal"):
@@ -307,6 +312,9 @@ def parse_scenario(data, robots, where="scenario"):
                     or value < 0:
                 raise ConfigError("%s.%s: expected a number >= 0, got %r" % (w, key, value))
             setattr(step, key, float(value))
+        step.cross_edges = s.get("cross_edges", False)
+        if not isinstance(step.cross_edges, bool):
+            raise ConfigError("%s.cross_edges: expected true or false, got %r" % (w, step.cross_edges))
         if behavior in ("go_to_goal", "assembly_to_goal"):
             step.robots, step.goals = _pairs(s.get("goals"), w + ".goals", robots, 2)
         elif behavior == "follow_velocity":

@@ -150,6 +150,10 @@ class RobotGeometry:
         h = self.body_side / 2.0
         return np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
 
+    def footprint_radius(self):
+        """Distance from the body centre to the footprint's farthest corner [m] (its circumradius)."""
+        return float(np.max(np.linalg.norm(self.footprint(), axis=1)))
+
     # Connection points (x, y, heading) in the body frame. A connection
     # point's heading points out of the body, so two points that meet face
     # each other (headings differ by pi) and the two robots have equal

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import RobotGeometry, yaw_from_quaternion
+from puzzlebot_common.stages import stages
 from puzzlebot_mpc.behaviors import FAILED, RUNNING, SUCCEEDED
 from puzzlebot_mpc.config_files import load_settings, load_target_file
 from puzzlebot_mpc.control_loop import ControlLoop
@@ -48,7 +49,8 @@ class ClosedLoop:
         self.geometry = geometry or RobotGeometry()
         if targets is None:
             targets = load_target_file(self.geometry)
-        self.loop = ControlLoop(self.names, self.settings, self.geometry, targets)
+        self.loop = ControlLoop(self.names, self.settings, self.geometry, targets,
+                                stages=stages(world.world_name, world.world_params))
         self.control_steps = int(round(self.settings.dt / world.dt))
         if abs(self.control_steps * world.dt - self.settings.dt) > 1e-9:
             raise ConfigError("the control period (%g s) must be a whole number of physics steps (%g s)"

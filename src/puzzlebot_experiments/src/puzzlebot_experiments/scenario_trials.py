@@ -50,11 +50,19 @@ def request_of(step):
     """BehaviorRequest of a scenario Step."""
     return BehaviorRequest(step.behavior, list(step.robots), [tuple(g) for g in step.goals],
                            [tuple(v) for v in step.velocities], step.tolerance, step.timeout, step.target,
-                           [tuple(s) for s in step.slots], list(step.pair), step.distance, list(step.groups))
+                           [tuple(s) for s in step.slots], list(step.pair), step.distance, list(step.groups),
+                           cross_edges=step.cross_edges)
 
 
-def physical_problems(cl, step, coupled, body_side):
-    """What Bullet contradicts after ``step`` (a list of short texts; empty: it agrees)."""
+def heights(cl):
+    """{robot: base_link height [m]} in Bullet."""
+    return {name: cl.world.pose(name)[0][2] for name in cl.names}
+
+
+def physical_problems(cl, step, coupled, body_side, z_start=None):
+    """What Bullet contradicts after ``step`` (a list of short texts; empty: it agrees). ``z_start``: the
+    robots' heights at the step's start ({robot: m}): a robot that went down by more than half the stage's
+    height in a step without ``cross_edges`` left its stage (the MPC's stage edges should have held it)."""
     found = {(p.anchor_robot, p.opening_robot): p for p in cl.world.all_physical_pairs()}
     physical = {key: p.status for key, p in found.items()}
     problems = []
@@ -70,6 +78,11 @@ def physical_problems(cl, step, coupled, body_side):
         inside, x, yaw = anchor_in_holder(cl.world, name, body_side)
         if not inside:
             problems.append("%s's anchor out of its holder (x %.1f mm, yaw %.2f rad)" % (name, 1e3 * x, yaw))
+    if z_start and not step.cross_edges:
+        drop = 0.5 * cl.world.world_params.stage_height
+        for name, z in heights(cl).items():
+            if z < z_start[name] - drop:
+                problems.append("%s left its stage (down %.0f mm)" % (name, 1e3 * (z_start[name] - z)))
     return problems
 
 
@@ -111,7 +124,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
         for step in sc.steps:
             req = request_of(step)
             limit = (step.timeout or 60.0) + SETTLE
-            t0 = cl.time
+            t0, z0 = cl.time, heights(cl)
             try:
                 state, message, elapsed = cl.run_behavior(req, limit)
             except RuntimeError as e:          # a pose the pose gate rejects (a robot fell off a stage): the
@@ -120,7 +133,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
                 state, message, elapsed = "error", "error in the stack: %s: %s" % (type(e).__name__, e), \
                     cl.time - t0
             coupled = sorted(cl.loop.pairs.coupled)
-            problems = physical_problems(cl, step, coupled, cfg.robot.body_side)
+            problems = physical_problems(cl, step, coupled, cfg.robot.body_side, z0)
             step_ok = state == SUCCEEDED and not problems
             steps.append({"behavior": step.behavior, "state": STATE_NAMES.get(state, str(state)),
                           "sim_seconds": round(elapsed, 2), "ok": step_ok, "coupled_pairs": len(coupled),

@@ -18,7 +18,11 @@ Safety rules, applied every step:
   gate (a rejection in the last ``reacquire_frames`` frames), is commanded to
   zero and left out of its behaviour and of new pairs until trusted poses return;
 - a failed solve commands zero to every robot (``fallback == "stop"``), open-loop
-  commands (the decoupling wiggle) included.
+  commands (the decoupling wiggle) included;
+- with the world's stages (``stages``, puzzlebot_common.stages) and
+  ``settings.edges``, every robot's footprint stays on the stage it stands on
+  (the MPC's edge boxes), except the robots of a behaviour requested with
+  ``cross_edges`` (down a step, over a gap).
 """
 
 import math
@@ -29,6 +33,7 @@ import numpy as np
 
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_common.pose_gate import PoseGate, PoseGateParams, Verdict
+from puzzlebot_common.stages import StageMap
 from puzzlebot_mpc.behaviors import FAILED, RUNNING, STOP, BehaviorError, BehaviorManager, BehaviorRequest
 from puzzlebot_mpc.compensation import Compensation
 from puzzlebot_mpc.controller import MPCResult, MultiRobotMPC
@@ -115,10 +120,12 @@ class ControlLoop:
     """Poses in, behaviour objectives, MPC solve, commands out."""
 
     def __init__(self, robot_names, settings, geometry=None, targets=None, actuator_model=None,
-                 pose_gate=PoseGateParams()):
+                 pose_gate=PoseGateParams(), stages=()):
         self.names = list(robot_names)
         self.settings = settings
         self.geometry = geometry or RobotGeometry()
+        self.stages = list(stages)      # puzzlebot_common.stages.Stage: the world's stages (none: the floor)
+        self.stage_map = self._stage_map(settings)
         self.poses = PoseBook(self.names, settings.pose_timeout, settings.hardware_v_max, settings.hardware_w_max,
                               pose_gate)
         self.pairs = PairBook.from_settings(self.geometry, settings)
@@ -206,9 +213,28 @@ class ControlLoop:
         the next step, and ``mpc``: a MultiRobotMPC built for them (see :meth:`build_mpc`) when the change
         reaches the MPC's problem; None keeps the current one (a change the behaviours read every step)."""
         self.settings = settings
+        self.stage_map = self._stage_map(settings)
         self.behaviors.set_settings(settings)
         if mpc is not None:
             self.mpc = mpc
+
+    def _stage_map(self, settings):
+        """The StageMap the edge boxes come from (the footprint's circumradius + ``edge_margin`` inside
+        every edge); None without stages or with ``edges`` off."""
+        if not (settings.edges and self.stages):
+            return None
+        return StageMap(self.stages, self.geometry.footprint_radius() + settings.edge_margin)
+
+    def edge_boxes(self, poses):
+        """(N, 4) edge boxes (x_lo, x_hi, y_lo, y_hi) [m] of the robots at ``poses`` (name -> pose or None):
+        the stage each stands on, shrunk by the footprint; +-inf on the floor, for a robot without a pose
+        and for the robots the running behaviour lets cross (``cross_edges``). None without stages."""
+        if self.stage_map is None:
+            return None
+        free = (-math.inf, math.inf, -math.inf, math.inf)
+        crossing = self.behaviors.crossing()
+        return np.array([free if poses[m] is None or m in crossing else self.stage_map.box(*poses[m][:2])
+                         for m in self.names])
 
     def build_mpc(self, settings, keys):
         """A MultiRobotMPC for ``settings``, with the structure of pair slots ``keys`` (pair_keys()) built;
@@ -239,6 +265,7 @@ class ControlLoop:
         if self.behaviors.coupling():
             self.pairs.assign_active(poses)
         obj = self.behaviors.objectives(now, poses)
+        obj.edge_box = self.edge_boxes(poses)
         x0 = np.zeros((n, NX))
         for i, name in enumerate(self.names):
             pose = poses[name]

@@ -96,6 +96,10 @@ class Objectives:
     of the MPC's command this step (the paper's wiggle is an open-loop
     command, outside the MPC's velocity limits and butterfly set); applied by
     control_loop.ControlLoop after a successful solve only.
+    edge_box: None (no edges) or (N, 4) (x_lo, x_hi, y_lo, y_hi) [m, world
+    frame]: the box each robot's base_link keeps to over the horizon (soft),
+    +-inf on a side without an edge (control_loop fills it from the world's
+    stages).
     """
 
     goal: np.ndarray
@@ -104,6 +108,7 @@ class Objectives:
     velocity_mask: np.ndarray
     pairs: List[PairObjective] = field(default_factory=list)
     open_loop: Dict[int, Tuple[float, float]] = field(default_factory=dict)
+    edge_box: Optional[np.ndarray] = None
 
     @classmethod
     def stop_all(cls, n):
@@ -356,7 +361,7 @@ class MultiRobotMPC:
             raise ValueError("unknown solver %r; known: %s" % (settings.solver, ", ".join(SOLVERS)))
         self.settings = settings
         self.n = n_robots
-        self._qps = OrderedDict()     # (robots, local pairs) -> _ClarabelQP or _IpoptNLP
+        self._qps = OrderedDict()     # (robots, local pairs, edges) -> _ClarabelQP, _ActiveSetQP or _IpoptNLP
         self._plans = OrderedDict()   # sorted slot tuple -> list of _Part
         self._warm = None             # (X (N, H+1, 5), U (N, H, 2)) of the last successful step
         self._pool = None
@@ -408,13 +413,13 @@ class MultiRobotMPC:
             self._plans.popitem(last=False)
         return plan
 
-    def _qp(self, part):
-        k = (part.robots, part.local_pairs)
+    def _qp(self, part, edges=False):
+        k = (part.robots, part.local_pairs, edges)
         qp = self._qps.get(k)
         if qp is None:
             t0 = time.perf_counter()
             s = self.settings
-            st = Structure(len(part.robots), s.horizon, s.constraint_horizon, part.local_pairs)
+            st = Structure(len(part.robots), s.horizon, s.constraint_horizon, part.local_pairs, edges)
             qp = {"ipopt": _IpoptNLP, "clarabel": _ClarabelQP, "active_set": _ActiveSetQP}[s.solver](s, st)
             self.build_seconds += time.perf_counter() - t0
             self._qps[k] = qp
@@ -446,10 +451,10 @@ class MultiRobotMPC:
         bad = [k for k in key if not (0 <= k[0] < n and 0 <= k[1] < n) or k[0] == k[1]]
         if bad:
             raise ValueError("pair slots must join two different robots of 0..%d, got %s" % (n - 1, bad))
-        parts = [(part, self._qp(part)) for part in self._plan(key)]
+        data = qpm.pack(s, x0, objectives, pairs)
+        parts = [(part, self._qp(part, data.has_edges(list(part.robots)))) for part in self._plan(key)]
         solver_s = sum(qp.solver_s for _, qp in parts)
         Xbar, Ubar, cold = self._initial_guess(x0)
-        data = qpm.pack(s, x0, objectives, pairs)
         iters = s.sqp_iterations_cold if cold else s.sqp_iterations
         pref = self._preferred_direction(x0, objectives, pairs)
         ambiguous = self._ambiguous(Xbar, objectives, pairs) if s.butterfly else []
@@ -474,7 +479,7 @@ class MultiRobotMPC:
                                                                    "subproblems": len(parts),
                                                                    "solver_ms": solver_ms})
         Xs, Us = np.zeros((n, h + 1, NX)), np.zeros((n, h, NU))
-        cost, max_pip, max_bf = 0.0, 0.0, 0.0
+        cost, max_pip, max_bf, max_edge = 0.0, 0.0, 0.0, 0.0
         for (part, qp), (z, _, _, dpart) in zip(parts, outs):
             lay = qp.lay
             z[lay.slack] = np.maximum(z[lay.slack], 0.0)    # interior-point bound tolerance (~1e-8) x penalty
@@ -485,12 +490,15 @@ class MultiRobotMPC:
             sp_idx, sb_idx = lay.sp_idx[lay.sp_idx >= 0], lay.sb_idx[lay.sb_idx >= 0]
             max_pip = max(max_pip, float(z[sp_idx].max()) if sp_idx.size else 0.0)
             max_bf = max(max_bf, float(z[sb_idx].max()) if sb_idx.size else 0.0)
+            se_idx = lay.se_idx[lay.se_idx >= 0]
+            max_edge = max(max_edge, float(z[se_idx].max()) if se_idx.size else 0.0)
         self._warm = (Xs, Us)
         X = self._rollout(x0, Xs[:, 0, 3:], Us)
         commands = X[:, 0, 3:5].copy()
         commands[np.abs(commands) < s.command_zero] = 0.0      # interior-point noise: at rest means exactly 0
         extra = {"structure_pairs": len(key), "butterfly_lobes_tried": 2 ** len(ambiguous),
-                 "max_pip_slack": max_pip, "max_butterfly_slack": max_bf, "sqp_iterations": iters,
+                 "max_pip_slack": max_pip, "max_butterfly_slack": max_bf, "max_edge_slack": max_edge,
+                 "sqp_iterations": iters,
                  "subproblems": len(parts), "solver_ms": solver_ms}
         return MPCResult(commands, X, True, outs[0][1], solve_ms, qp_iters, cost, extra=extra)
 

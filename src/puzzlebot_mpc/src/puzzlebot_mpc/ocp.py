@@ -20,7 +20,8 @@ Decision variables, stage-major::
     (v_0, w_0) (n x 2)
     for k = 0..H-1:  u_k (n x 2),  x_{k+1} (n x 5),
                      s_pip_{k+1} (one per pair slot, if k+1 <= Hc),
-                     s_bf_k (one per robot; the butterfly slack of x_k)
+                     s_bf_k (one per robot; the butterfly slack of x_k),
+                     s_edge_{k+1} (one per robot, with stage edges)
     s_bf_H (one per robot)
 
 Cost (all residuals r enter as sum r^2; weights from MPCSettings; masks are
@@ -31,7 +32,7 @@ parameters multiplying the residuals, a pair is either active or coupled)::
          + velocity robots: w_velocity |(v, w) - ref_k|^2
          + pair slots:      (act W_pair(k) + coupled W_coupled) (|dp|^2, tan^2(dtheta / 2))
                             + act w_pair_lateral (lat_i^2 + lat_j^2)    (k < H)
-         + w_slack_pip s_pip + w_slack_butterfly s_bf          (exact L1 penalties)
+         + w_slack_pip s_pip + w_slack_butterfly s_bf + w_slack_edge s_edge   (exact L1 penalties)
 
 Constraints::
 
@@ -41,6 +42,7 @@ Constraints::
     pip:  G_p q_p(x_k) - h_p <= s_pip      (normalised rows [m])  k = 1..Hc
           c |dtheta_p - 2 pi m_p| - c yaw_lim_p <= s_pip (c = YAW_ROW_SCALE)
     butterfly: +-w - (w_max / v_max) sigma_k v <= w_free + s_bf   k = 0..H
+    edges:     x_lo <= px, px <= x_hi, y_lo <= py, py <= y_hi  (each - s_edge)  k = 1..H
 
 ``lat_i`` (``lat_j``) is the sideways offset of the pair's position error in
 robot i's (j's) frame. ``q_p`` is the pair's head point expressed in the polygon robot's frame and
@@ -48,7 +50,10 @@ robot i's (j's) frame. ``q_p`` is the pair's head point expressed in the polygon
 coupled pair within the connection's yaw freedom (``m_p`` unwraps the raw
 heading difference at the measured state); ``sigma_k`` = +-1 is the
 direction of travel the butterfly cone is linearised for (chosen per step
-from the previous solution). The soft constraints make every QP feasible:
+from the previous solution). ``(x_lo, x_hi, y_lo, y_hi)`` is the box the
+robot's base_link keeps to stay on the stage it stands on (a parameter per
+robot, +-EDGE_FREE where it has no edge); the rows exist only in a structure
+with ``edges``. The soft constraints make every QP feasible:
 a coupled pair that the measured state already puts outside its polygon is
 pulled back instead of making the problem infeasible.
 """
@@ -64,6 +69,8 @@ from puzzlebot_common.model import NU, NX, euler_step
 
 POLY_ROWS = 4          # rows per coupling polygon (triangles get one inactive row)
 YAW_ROW_SCALE = 0.025  # m/rad: heading rows of coupled pairs share the polygon rows' slack (metres)
+EDGE_ROWS = 4          # rows per robot and stage of the edge box: x_hi, -x_lo, y_hi, -y_lo
+EDGE_FREE = 1.0e3      # m: the box bound of a side without an edge (a row that never binds)
 
 
 class ParamLayout:
@@ -98,6 +105,7 @@ class Structure:
     horizon: int
     constraint_horizon: int
     pairs: Tuple[Tuple[int, int], ...]     # (point robot index, polygon robot index) per slot
+    edges: bool = False                    # edge-box rows (and their slacks) for every robot, k = 1..H
 
 
 class OcpLayout:
@@ -110,6 +118,7 @@ class OcpLayout:
         self.x_idx = np.zeros((h + 1, n, NX), dtype=int)   # x_idx[0, :, :3] unused (measured pose)
         self.sp_idx = np.full((h + 1, P), -1, dtype=int)
         self.sb_idx = np.full((h + 1, n), -1, dtype=int)
+        self.se_idx = np.full((h + 1, n), -1, dtype=int)   # edge slacks of x_1..x_H (with st.edges)
         self.x_idx[0, :, 3:] = np.arange(0, n * 2).reshape(n, 2)
         self.x_idx[0, :, :3] = -1
         i = n * 2
@@ -123,12 +132,16 @@ class OcpLayout:
                 i += P
             self.sb_idx[k] = np.arange(i, i + n)
             i += n
+            if st.edges:
+                self.se_idx[k + 1] = np.arange(i, i + n)
+                i += n
         self.sb_idx[h] = np.arange(i, i + n)
         i += n
         self.nz = i
         self.slack = np.zeros(i, dtype=bool)
         self.slack[self.sp_idx[self.sp_idx >= 0]] = True
         self.slack[self.sb_idx[self.sb_idx >= 0]] = True
+        self.slack[self.se_idx[self.se_idx >= 0]] = True
 
     def states(self, z, x0):
         """(n, H+1, 5) states: the measured pose at k = 0, the variables elsewhere."""
@@ -170,6 +183,8 @@ def params_layout(st: Structure):
     lay.add("vref", (n * h, 2))         # robot-major: row i*h + (k-1) is robot i's reference at stage k
     lay.add("vel_on", (n, 2))        # weight scale of the v and w tracking terms
     lay.add("bsign", (n * (h + 1),))    # butterfly direction of robot i at stage k = 0..H: row i*(h+1) + k
+    if st.edges:
+        lay.add("edge_box", (n, EDGE_ROWS))   # (x_lo, x_hi, y_lo, y_hi) of robot i's base_link [m]
     if P:
         lay.add("pt_i", (P, 3))         # aligned point on the point robot (x, y, heading)
         lay.add("pt_j", (P, 3))         # aligned point on the polygon robot
@@ -193,6 +208,8 @@ def param_vector(par, d):
     par.put(p, "vref", d.vref.reshape(n * h, 2))
     par.put(p, "vel_on", d.vel_on)
     par.put(p, "bsign", d.bsign.reshape(-1))
+    if "edge_box" in par.blocks:
+        par.put(p, "edge_box", d.edge_box)
     if len(d.act):
         for name in ("pt_i", "pt_j", "act", "conn", "head", "yaw_lim", "yaw_off"):
             par.put(p, name, getattr(d, name))
@@ -244,6 +261,7 @@ class Problem:
         vref = self.par.sym(p, "vref")
         vel_on = self.par.sym(p, "vel_on")
         bsign = self.par.sym(p, "bsign")
+        edge_box = self.par.sym(p, "edge_box") if st.edges else None
         if P:
             pt_i, pt_j = self.par.sym(p, "pt_i"), self.par.sym(p, "pt_j")
             act, conn = self.par.sym(p, "act"), self.par.sym(p, "conn")
@@ -292,6 +310,9 @@ class Problem:
                 res.append(vel_on[i, :].T * math.sqrt(s.w_velocity) * (x[3:5] - vref[i * h + k - 1, :].T))
                 if s.butterfly:
                     self._butterfly(ineq, x, bsign[i * (h + 1) + k], z[int(L.sb_idx[k, i])], ratio)
+                if st.edges:
+                    se, b = z[int(L.se_idx[k, i])], edge_box[i, :]
+                    ineq.append(ca.vertcat(x[0] - b[1], b[0] - x[0], x[1] - b[3], b[2] - x[1]) - se)
             w_pos = s.w_pair_terminal_pos if terminal else s.w_pair_stage_pos
             w_ang = s.w_pair_terminal_angle if terminal else s.w_pair_stage_angle
             wc_pos, wc_ang = s.w_coupled_pos, s.w_coupled_angle
@@ -318,6 +339,7 @@ class Problem:
         lin = np.zeros(L.nz)
         lin[L.sp_idx[L.sp_idx >= 0]] = s.w_slack_pip
         lin[L.sb_idx[L.sb_idx >= 0]] = s.w_slack_butterfly
+        lin[L.se_idx[L.se_idx >= 0]] = s.w_slack_edge
         self.lin = lin
         self.lb, self.ub = L.bounds(s)
         self.cost = ca.sumsqr(self.res) + ca.dot(ca.DM(lin), z)

@@ -10,7 +10,9 @@ that compare the two), written as small blocks of fixed shape:
   and stage (alignment, facing);
 - row blocks: the dynamics of every robot and stage (zero cone), the
   command's rate limit, the butterfly rows of every robot and stage, the
-  coupling rows of every pair slot and stage k <= Hc, the variable bounds.
+  edge-box rows of every robot and stage k >= 1 (a structure with
+  ``edges``), the coupling rows of every pair slot and stage k <= Hc, the
+  variable bounds.
 
 :class:`QPStructure` fixes, once per :class:`ocp.Structure`, where each
 block entry lands in the CSC data of P (upper triangle) and A, so that a
@@ -37,7 +39,7 @@ import scipy.sparse as sp
 
 from puzzlebot_common.geometry import polygon_halfplanes
 from puzzlebot_common.model import NU, NX
-from puzzlebot_mpc.ocp import POLY_ROWS, YAW_ROW_SCALE, OcpLayout
+from puzzlebot_mpc.ocp import EDGE_FREE, EDGE_ROWS, POLY_ROWS, YAW_ROW_SCALE, OcpLayout
 
 # local variable order of the blocks
 _RS_VARS = 7     # robot stage k >= 1: u_{k-1} (dv, dw), x_k (px, py, theta, v, w)
@@ -53,7 +55,9 @@ class StepData:
     scales of the v and w terms; bsign (n, H+1) butterfly cone per stage
     (+-1). Pair slots: pt_i, pt_j (P, 3) aligned points; act, conn (P,)
     masks; head (P, 2); poly_g (P, 4, 2), poly_h (P, 4) tightened, unit-row
-    coupling polygons; yaw_lim, yaw_off (P,) [rad].
+    coupling polygons; yaw_lim, yaw_off (P,) [rad]. edge_box (n, 4): the
+    box (x_lo, x_hi, y_lo, y_hi) [m] each robot's base_link keeps to (+-EDGE_FREE:
+    no edge on that side).
     """
 
     x0: np.ndarray
@@ -71,13 +75,18 @@ class StepData:
     poly_h: np.ndarray
     yaw_lim: np.ndarray
     yaw_off: np.ndarray
+    edge_box: np.ndarray
 
     def subset(self, robots, slots):
         """The data of a subproblem: robots (global indices, in its order) and pair slots (indices)."""
         return StepData(self.x0[robots], self.goal[robots], self.goal_on[robots], self.vref[robots],
                         self.vel_on[robots], self.bsign[robots], self.pt_i[slots], self.pt_j[slots],
                         self.act[slots], self.conn[slots], self.head[slots], self.poly_g[slots],
-                        self.poly_h[slots], self.yaw_lim[slots], self.yaw_off[slots])
+                        self.poly_h[slots], self.yaw_lim[slots], self.yaw_off[slots], self.edge_box[robots])
+
+    def has_edges(self, robots):
+        """True when one of ``robots`` (indices) has an edge (a box side closer than EDGE_FREE)."""
+        return bool(np.any(np.abs(self.edge_box[robots]) < EDGE_FREE))
 
 
 def _matvec(M, x):
@@ -176,11 +185,17 @@ def pack(settings, x0, objectives, pairs):
     pt_i = np.array([pr.point_i for pr in pairs], float).reshape(P, 3)
     pt_j = np.array([pr.point_j for pr in pairs], float).reshape(P, 3)
     raw = x0[ii, 2] + pt_i[:, 2] - x0[jj, 2] - pt_j[:, 2] - math.pi
+    box = np.tile([-EDGE_FREE, EDGE_FREE, -EDGE_FREE, EDGE_FREE], (n, 1))
+    if o.edge_box is not None:
+        eb = np.asarray(o.edge_box, float)
+        if eb.shape != (n, EDGE_ROWS) or np.isnan(eb).any():
+            raise ValueError("edge_box must be (N, 4) (x_lo, x_hi, y_lo, y_hi) without NaN, got %s" % (eb.shape,))
+        box = np.clip(eb, -EDGE_FREE, EDGE_FREE)
     return StepData(x0, finite_or_zero(o.goal), np.asarray(o.goal_mask, float), vel, vm,
                     np.ones((n, h + 1)), pt_i, pt_j, np.array([float(pr.active) for pr in pairs]),
                     np.array([float(pr.coupled) for pr in pairs]), heads, g, hh,
                     np.array([pr.yaw_limit for pr in pairs], float),
-                    2 * math.pi * np.round(raw / (2 * math.pi)))
+                    2 * math.pi * np.round(raw / (2 * math.pi)), box)
 
 
 class _RowBlocks:
@@ -271,6 +286,7 @@ class QPStructure:
         lin = np.zeros(nz)
         lin[L.sp_idx[L.sp_idx >= 0]] = s.w_slack_pip
         lin[L.sb_idx[L.sb_idx >= 0]] = s.w_slack_butterfly
+        lin[L.se_idx[L.se_idx >= 0]] = s.w_slack_edge
         self.lin = lin
         # ---------------------------------------------------------- row blocks
         eq = _RowBlocks()
@@ -301,6 +317,10 @@ class QPStructure:
         if s.butterfly:
             Vb = np.concatenate([L.x_idx[:, :, 3:5], L.sb_idx[:, :, None]], axis=2).reshape((H + 1) * n, 3)
             ineq.add("bf", Vb, np.ones((2, 3), bool))
+        if st.edges:
+            Ve = np.stack([L.x_idx[1:, :, 0], L.x_idx[1:, :, 1], L.se_idx[1:]], axis=2).reshape(H * n, 3)
+            pate = np.array([[1, 0, 1], [1, 0, 1], [0, 1, 1], [0, 1, 1]], bool)
+            ineq.add("edge", Ve, pate)
         if P and Hc:
             ks = np.arange(1, Hc + 1)
             Vp = np.concatenate([L.x_idx[ks][:, pi, :3], L.x_idx[ks][:, pj, :3], L.sp_idx[ks][:, :, None]],
@@ -392,6 +412,8 @@ class QPStructure:
             if k < st.horizon:
                 robot[L.u_idx[k]], stage[L.u_idx[k]] = np.arange(n)[:, None], k + 0.5
             robot[L.sb_idx[k]], stage[L.sb_idx[k]] = np.arange(n), k
+            if st.edges and k > 0:
+                robot[L.se_idx[k]], stage[L.se_idx[k]] = np.arange(n), k
             if len(st.pairs) and L.sp_idx[k, 0] >= 0:
                 robot[L.sp_idx[k]], stage[L.sp_idx[k]] = self.pairs[:, 0] + 0.5, k
         self.var_robot = np.append(robot, np.inf)          # [nz]: rows without a variable
@@ -428,6 +450,7 @@ class QPStructure:
         B = (H + 1) * n                                          # butterfly rows (k, i): [sg, 1, -1], [sg, -1, -1]
         self._bf_vals = np.tile([0.0, 1.0, -1.0, 0.0, -1.0, -1.0], (B, 1))
         self._bf_b = np.full((B, 2), s.w_free)
+        self._edge_vals = np.tile([1.0, -1.0, -1.0, -1.0, 1.0, -1.0, -1.0, -1.0], (H * n, 1))
         if not P:
             return
         self.ps_slot = np.tile(np.arange(P), H)                  # rows (k, q) of the pair stages
@@ -596,6 +619,10 @@ class QPStructure:
             bf[:, 0] = bf[:, 3] = -(s.w_max / s.v_max) * d.bsign.T.reshape(-1)      # rows (k, i)
             vals.append(bf)
             bs.append(self._bf_b)
+        if self.st.edges:       # rows (k, i): px <= x_hi, -px <= -x_lo, py <= y_hi, -py <= -y_lo (- s_edge)
+            eb = d.edge_box
+            vals.append(self._edge_vals)
+            bs.append(np.tile(_columns(eb[:, 1], -eb[:, 0], eb[:, 3], -eb[:, 2]), (self.st.horizon, 1)))
         if len(self.pairs) and self.st.constraint_horizon:
             Ap, bp = self._pip_rows(d, zbar)
             vals.append(Ap)

@@ -20,7 +20,8 @@ def request_from_srv(req):
                            velocities=[(t.linear.x, t.angular.z) for t in req.velocities],
                            tolerance=req.tolerance, timeout=req.timeout, target=req.target,
                            slots=[(sl.x, sl.y, sl.theta) for sl in req.slots], pair=list(req.pair),
-                           distance=req.distance, groups=list(req.groups), queue=req.queue, start_time=req.start_time)
+                           distance=req.distance, groups=list(req.groups), cross_edges=bool(req.cross_edges),
+                           queue=req.queue, start_time=req.start_time)
 
 
 def pose2d(p):

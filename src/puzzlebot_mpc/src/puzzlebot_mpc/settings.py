@@ -48,6 +48,11 @@ class MPCSettings:
     w_slack_butterfly: float = 1.0e5  # s/rad: exact-penalty weight of a butterfly-set violation
     slack_regularisation: float = 1.0e-2  # small quadratic weight on slacks (strictly convex QP)
     pip_margin: float = 0.001        # m: coupling polygons are tightened by this much in the constraint
+    edges: bool = True               # keep every robot's footprint on the stage it stands on (the world's
+                                     # stages, puzzlebot_common.stages; none on the flat floor), except the
+                                     # robots of a behaviour requested with cross_edges (soft, exact penalty)
+    edge_margin: float = 0.0         # m: clearance from a stage's edge beyond the footprint's circumradius
+    w_slack_edge: float = 1.0e6      # 1/m: exact-penalty weight of a robot's base_link beyond its edge box
     solver: str = "active_set"       # real-time iteration, one sparse QP per step, solved by "active_set" (the
                                      # primal-dual active-set method, warm-started) or "clarabel" (interior
                                      # point); or "ipopt" (the full NLP, the reference)
@@ -169,10 +174,10 @@ class MPCSettings:
                                 "insert_yaw_tolerance", "insert_confirm_steps", "insert_timeout",
                                 "decouple_confirm_steps",
                                 "slack_regularisation", "qp_tolerance", "command_zero", "w_slack_pip",
-                                "w_slack_butterfly"], where)
+                                "w_slack_butterfly", "w_slack_edge"], where)
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
-                    "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin",
+                    "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin", "edge_margin",
                     "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",

@@ -10,7 +10,8 @@ refused change leaves every value as it was and the reason is the
 parameter ``refused`` of the answer (and the node's log). An accepted one
 is used from the next control step:
 
-- ``goal_tolerance`` is read by go_to_goal every step (level LIVE);
+- ``goal_tolerance`` is read by go_to_goal every step, ``edges`` and
+  ``edge_margin`` by the control loop's edge boxes (level LIVE);
 - the weights and limits are constants of the MPC's CasADi problem
   (ocp.py), so a change of any of them (level REBUILD) builds the problem
   anew for the current pair structure, in the reconfigure thread while the
@@ -34,8 +35,8 @@ TUNABLE = {name: REBUILD for name in (
     "v_max", "w_max", "dv_max", "dw_max", "butterfly", "w_free",
     "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest", "w_control",
     "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos", "w_pair_stage_angle", "w_pair_lateral",
-    "w_coupled_pos", "w_coupled_angle", "w_slack_pip", "w_slack_butterfly", "slack_regularisation", "pip_margin")}
-TUNABLE["goal_tolerance"] = LIVE
+    "w_coupled_pos", "w_coupled_angle", "w_slack_pip", "w_slack_butterfly", "w_slack_edge", "slack_regularisation", "pip_margin")}
+TUNABLE.update(goal_tolerance=LIVE, edges=LIVE, edge_margin=LIVE)
 #: the answer's parameter that says why the last change was refused ("" when it was applied)
 REFUSED = "refused"
 

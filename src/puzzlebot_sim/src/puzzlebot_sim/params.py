@@ -13,7 +13,8 @@ casters, front opening, anchor holder and side connectors.
 three-bar linkage and its measured force profile.
 ``SimParams`` (config/sim.yaml, key ``sim``): stepping, solver, world and the
 injectable actuator/measurement effects.
-``WorldParams`` (config/sim.yaml, key ``world``): dimensions of the worlds.
+``WorldParams`` (config/sim.yaml, key ``world``): dimensions of the worlds
+(defined in puzzlebot_common.stages, which the MPC reads too).
 ``AnchorRestParams`` (config/sim.yaml, key ``anchor_rest``): when a resting
 anchor may be frozen to its robot (a speed shortcut, docs/sim.md).
 
@@ -31,6 +32,7 @@ from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_common.hardware import CONTROL_PERIOD, MOCAP_RATE
 from puzzlebot_common.params import from_mapping, require_positive
+from puzzlebot_common.stages import WorldParams  # noqa: F401  (the worlds' dimensions: one home, shared with the MPC)
 
 #: Bullet's collision margin for URDF shapes [m]. A box half-extent or a
 #: cylinder radius below it is inflated to it in contacts, so every collision
@@ -424,28 +426,3 @@ class AnchorRestParams:
 
     def check(self, where="anchor_rest"):
         require_positive(self, [f.name for f in fields(self) if f.name != "enabled"], where)
-
-
-@dataclass(frozen=True)
-class WorldParams:
-    """Dimensions of the worlds (config/sim.yaml, ``world``).
-
-    ``step``: a stage (top at ``stage_height``) covering x < ``edge_x``, the
-    floor below it. ``gap``: two stages of ``stage_height``, one for
-    x < ``edge_x``, the other for x > ``edge_x`` + ``gap_width``.
-    """
-
-    floor_friction: float = 1.0      # -
-    stage_height: float = 0.05       # m, at least one robot height
-    edge_x: float = 0.0              # m, x of the (first) stage's edge
-    stage_length: float = 0.6        # m, stage extent in x
-    stage_width: float = 0.6         # m, stage extent in y (centred on y = 0)
-    gap_width: float = 0.04          # m, gap between the two stages of the gap world
-
-    @classmethod
-    def from_dict(cls, data, where="world"):
-        return from_mapping(cls, data, where)
-
-    def check(self, where="world"):
-        require_positive(self, ["stage_height", "stage_length", "stage_width", "gap_width"], where)
-        _require_nonnegative(self, ["floor_friction"], where)

@@ -58,6 +58,8 @@ class BehaviorRequest:
     distance: float = 0.0                          # drive_assembly: metres to drive (0: for timeout s)
     groups: Sequence[int] = ()                     # couple: robots per group (consecutive in robots), each
                                                    # forming its own copy of the target; empty: one group
+    cross_edges: bool = False                      # its robots may leave their stage (MPCSettings.edges):
+                                                   # down a step, over a gap
     # Scheduling (ControlLoop.request): when the behaviour starts.
     queue: bool = False          # start once the running behaviour and those queued before it have ended
                                  # (dropped if one of them fails); False: replace the running one now
@@ -188,6 +190,10 @@ class Behavior:
     def pair_slots(self):
         """Pairs outside the pair book that need a slot in the MPC (the pair being decoupled)."""
         return []
+
+    def crossing(self):
+        """Robots this behaviour lets off the edges of their stages (a request with ``cross_edges``)."""
+        return list(self.robots) if self.req.cross_edges else []
 
     def driven_pairs(self):
         """Keys of active pairs whose robots this behaviour drives itself this step: the MPC leaves out

@@ -150,6 +150,10 @@ class BehaviorManager:
         """True while a behaviour runs that has the pair book assign active pairs every step (couple)."""
         return self._state == RUNNING and self._behavior.assigns_active_pairs
 
+    def crossing(self):
+        """Robots the running behaviour lets off their stages' edges (its request's ``cross_edges``)."""
+        return set(self._behavior.crossing()) if self._state == RUNNING else set()
+
     # ----------------------------------------------------------- objectives
     def pair_slots(self):
         """Pairs that get a slot in the MPC this step: coupled, goals, the one being decoupled."""
