@@ -6,8 +6,8 @@ import pytest
 
 from puzzlebot_common.config import shipped_config
 from puzzlebot_common.errors import ConfigError
-from puzzlebot_experiments.scenario_trials import (format_table, plot_trials, request_of, run_trial, scenario_steps,
-                                                   summarize)
+from puzzlebot_experiments.scenario_trials import (PairTrace, format_table, parse_pair, plot_trials, request_of,
+                                                   run_trial, scenario_steps, summarize)
 
 SCENARIOS = shipped_config("puzzlebot_bringup", "scenarios")
 
@@ -28,6 +28,32 @@ def test_a_pair_cycle_run_is_checked_in_bullet_step_by_step():
     assert rec["success"], rec["steps"]
     assert all(s["ok"] and not s["problems"] for s in rec["steps"])
     assert rec["failed_mpc_steps"] == 0
+
+
+def test_a_traced_trial_is_the_same_trial_and_its_pair_goes_from_open_to_seated():
+    trace = PairTrace("pz1", "pz2", every=1.0)
+    traced = run_trial(SCENARIOS, "pair_cycle", seed=1, trial=0, on_tick=trace)
+    assert traced == run_trial(SCENARIOS, "pair_cycle", seed=1, trial=0)     # the trace only reads
+    rows = trace.rows
+    assert [r["step"] for r in rows] == sorted(r["step"] for r in rows) and {r["step"] for r in rows} == {0, 1, 2}
+    assert all(b["t"] - a["t"] == pytest.approx(1.0, abs=0.11) for a, b in zip(rows, rows[1:]) if a["step"] == b["step"])
+    first, couple_end = rows[0], [r for r in rows if r["step"] == 0][-1]
+    assert first["controller"] == "decoupled" and first["bullet"] == "-" and first["gap_mm"] > 10.0
+    assert couple_end["bullet"] == "head_inserted" and abs(couple_end["gap_mm"]) < 3.0
+    drive = [r for r in rows if r["step"] == 1]
+    assert all(r["controller"] == "coupled" and r["bullet"] == "head_inserted" for r in drive)
+    assert all(r["anchor_cmd"][0] > 0.0 for r in drive[1:])          # the pair drives forward as one body
+    table = trace.table().splitlines()
+    assert table[0].startswith("| t | step | controller") and len(table) == len(rows) + 2
+
+
+def test_a_traced_pair_is_named_anchor_robot_first_among_the_scenarios_robots():
+    assert parse_pair("pz7-pz8", ["pz7", "pz8"]) == ("pz7", "pz8")
+    for bad in ["pz7", "pz7-", "pz7-pz7", "pz7-pz8-pz9"]:
+        with pytest.raises(ConfigError, match="ANCHOR_ROBOT-OPENING_ROBOT"):
+            parse_pair(bad)
+    with pytest.raises(ConfigError, match="no robot pz9 in this scenario"):
+        parse_pair("pz1-pz9", ["pz1", "pz2"])
 
 
 def test_summary_counts_steps_reached_and_passed():

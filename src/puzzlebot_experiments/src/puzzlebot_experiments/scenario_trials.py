@@ -15,6 +15,13 @@ A step counts only when the behaviour succeeded *and* Bullet agrees:
 - after every step: every anchor still in its holder.
 
 A trial succeeds when every step does; it stops at the first failed step.
+
+One trial can be followed pair by pair (:class:`PairTrace`, ``scenario_trials
+--trial K --trace A-B``): what the controller believed of the pair, the docking
+manoeuvre's phase, what Bullet had, and the relative pose and commands,
+every ``--trace-every`` s. The trace reads only what each control step already
+measured (the mocap noise draws stay those of the untraced run), so a traced
+trial is the same trial.
 """
 
 from collections import Counter
@@ -25,10 +32,13 @@ import yaml
 from puzzlebot_common.errors import ConfigError
 
 from puzzlebot_common.robots import parse_robot_list
+from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.config_files import load_settings
+from puzzlebot_mpc.docking import seat_measure
 from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
-from puzzlebot_sim.coupling import BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD_ALIGNED, HEAD_INSERTED
+from puzzlebot_sim.coupling import (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD_ALIGNED, HEAD_INSERTED,
+                                    STATUS_NAMES as BULLET_STATUS)
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
 from puzzlebot_sim.config import load_sim_config
 from puzzlebot_sim.world import RobotStart
@@ -103,11 +113,13 @@ def parse_overrides(items):
     return out
 
 
-def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
+def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tick=None):
     """One run of ``scenario`` (from ``directory``); returns a JSON-able record.
 
     ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
     ``overrides``: MPC settings on top of mpc.yaml + mpc_sim.yaml (:func:`parse_overrides`).
+    ``on_tick(cl, step_index, tick)``: called after every control tick (a :class:`PairTrace`); it
+    must only read (the closed loop ``cl``, the tick's output).
     """
     cfg = cfg or load_sim_config(mocap=MOCAP)
     wseed = world_seed(seed, trial)
@@ -125,8 +137,9 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
             req = request_of(step)
             limit = (step.timeout or 60.0) + SETTLE
             t0, z0 = cl.time, heights(cl)
+            hook = None if on_tick is None else (lambda tick, k=len(steps): on_tick(cl, k, tick) and False)
             try:
-                state, message, elapsed = cl.run_behavior(req, limit)
+                state, message, elapsed = cl.run_behavior(req, limit, on_tick=hook)
             except RuntimeError as e:          # a pose the pose gate rejects (a robot fell off a stage): the
                 state, message, elapsed = FAILED, "pose rejected: %s" % e, cl.time - t0    # trial fails there
             except Exception as e:             # a bug in the stack: this trial fails and says so, the sweep goes on
@@ -149,6 +162,74 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None):
     if overrides:
         rec["mpc_overrides"] = dict(overrides)
     return rec
+
+
+class PairTrace:
+    """The timeline of one anchor pair in a trial (an ``on_tick`` for :func:`run_trial`).
+
+    ``anchor_robot``, ``opening_robot``: the pair (the anchor robot's anchor in the
+    opening robot's mouth); ``every`` [s]: one row per this much simulated time
+    (0: every control step). Each row (``rows``, dicts): ``t`` [s] simulated,
+    ``step`` (index in the scenario), ``controller`` (the controller's status of
+    the pair, or "-" when it holds none), ``docking`` (phase, pushes started,
+    aim [mm]), ``bullet`` (Bullet's status of the pair, "-": not in the
+    opening), ``gap_mm`` (between the faces), ``lateral_mm`` (C_a off the
+    opening's axis), ``dtheta`` [rad] (anchor robot's heading minus the opening
+    robot's), all from the poses the controller measured this step, and each
+    robot's command (v [m/s], w [rad/s]).
+    """
+
+    COLUMNS = ("t", "step", "controller", "docking", "bullet", "gap_mm", "lateral_mm", "dtheta", "anchor_cmd",
+               "opening_cmd")
+
+    def __init__(self, anchor_robot, opening_robot, every=0.5):
+        self.anchor_robot, self.opening_robot, self.every = anchor_robot, opening_robot, float(every)
+        self.rows, self._next = [], -np.inf
+
+    def __call__(self, cl, step, tick):
+        if tick.time < self._next - 1e-9:
+            return
+        self._next = tick.time + self.every
+        a, o = self.anchor_robot, self.opening_robot
+        book, out = cl.loop.pairs, tick.output
+        pair = book.find(a, o)
+        controller, docking = "-", "-"
+        if pair is not None and pair.type == pr.ANCHOR and pair.robot_i == a:
+            controller = "coupled" if pair.key in book.coupled else pr.STATUS_NAMES[pair.status]
+            d = book.docking.get(pair.key)
+            if d is not None:
+                docking = "%s %d %+.1f" % (d.phase, d.attempts, 1e3 * d.aim)
+        else:
+            pair = pr.make_pair(a, o, pr.ANCHOR, cl.geometry)
+        pa, po = out.poses.get(a), out.poses.get(o)
+        gap, lateral, dtheta = seat_measure(pair, pa, po) if pa is not None and po is not None else (np.nan,) * 3
+        bullet = cl.physical().get((a, o))
+        self.rows.append({"t": round(tick.time, 2), "step": step, "controller": controller, "docking": docking,
+                          "bullet": "-" if bullet is None else BULLET_STATUS[bullet],
+                          "gap_mm": round(1e3 * gap, 1), "lateral_mm": round(1e3 * lateral, 1),
+                          "dtheta": round(dtheta, 3), "anchor_cmd": tuple(round(c, 3) for c in out.commands[a]),
+                          "opening_cmd": tuple(round(c, 3) for c in out.commands[o])})
+
+    def table(self):
+        """The rows as a Markdown table."""
+        lines = ["| " + " | ".join(self.COLUMNS) + " |", "|" + "---|" * len(self.COLUMNS)]
+        for r in self.rows:
+            cells = ["%.2f" % r["t"] if c == "t" else "(%.3f, %.2f)" % r[c] if c.endswith("_cmd") else str(r[c])
+                     for c in self.COLUMNS]
+            lines.append("| " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+
+def parse_pair(text, names=None):
+    """'A-B' -> (A, B): an anchor pair named anchor robot first; ``names``: the robots it must be among."""
+    parts = text.split("-")
+    if len(parts) != 2 or not all(parts) or parts[0] == parts[1]:
+        raise ConfigError("--trace %r: give the pair as ANCHOR_ROBOT-OPENING_ROBOT, e.g. pz7-pz8" % text)
+    unknown = [p for p in parts if names is not None and p not in names]
+    if unknown:
+        raise ConfigError("--trace %s: no robot %s in this scenario (robots: %s)"
+                          % (text, ", ".join(unknown), ", ".join(names)))
+    return tuple(parts)
 
 
 def run_task(task):
