@@ -171,7 +171,8 @@ class PairTrace:
     opening robot's mouth); ``every`` [s]: one row per this much simulated time
     (0: every control step). Each row (``rows``, dicts): ``t`` [s] simulated,
     ``step`` (index in the scenario), ``controller`` (the controller's status of
-    the pair, or "-" when it holds none), ``docking`` (phase, pushes started,
+    the pair while it is a goal or coupled; "-" otherwise, e.g. while a decouple
+    owns it), ``docking`` (phase, pushes started,
     aim [mm]), ``bullet`` (Bullet's status of the pair, "-": not in the
     opening), ``gap_mm`` (between the faces), ``lateral_mm`` (C_a off the
     opening's axis), ``dtheta`` [rad] (anchor robot's heading minus the opening
