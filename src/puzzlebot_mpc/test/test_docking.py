@@ -142,3 +142,29 @@ def test_an_approach_that_comes_no_closer_backs_off_and_one_that_closes_in_does_
         d.update(0.03, 0.014, 1.0, t + k * DT)
     assert d.phase == dk.APPROACH                        # a fresh approach, its progress measured anew:
     assert d.best_at is None or d.best_at >= steps * DT + s.backoff_time - 1e-9
+
+
+def test_a_stalled_insertion_is_nudged_straight_in_then_the_mpc_inserts_again():
+    off = dk.Docking(dk.DockingSettings(insert_stall_time=0.0), mover="j", now=0.0)     # 0: off
+    assert not any(off.insert_stalled(0.011, k * DT) for k in range(100))
+    s = dk.DockingSettings(insert_stall_time=1.0)
+    steps = int(round(s.insert_stall_time / DT))
+    closing = dk.Docking(s, mover="j", now=0.0)                           # 3 mm/s deeper: progress, no nudge
+    assert not any(closing.insert_stalled(0.012 - 0.0003 * k, k * DT) for k in range(30))
+    backing = dk.Docking(s, mover="i", now=0.0)                           # a robot backing its anchor in: never
+    assert not any(backing.insert_stalled(0.011, k * DT) for k in range(100))
+    d = dk.Docking(s, mover="j", now=0.0)
+    stalled = [d.insert_stalled(0.011 + 0.001 * (k % 2), k * DT) for k in range(steps + 2)]
+    assert stalled.index(True) == steps and d.phase == dk.NUDGE and d.phase in dk.DRIVEN and d.nudges == 1
+    cmd = d.command(mover_heading=0.0, partner_heading=0.2)
+    assert cmd.v == pytest.approx(s.push_speed) and cmd.w > 0              # straight in, towards the partner's heading
+    t = steps * DT                                                        # the nudge began here
+    assert run(d, [0.011] * (int(round(s.nudge_time / DT)) - 1), t0=t + DT) is None and d.phase == dk.NUDGE
+    d.update(0.011, 0.0, 0.0, t + s.nudge_time + DT)                      # not home after nudge_time: the MPC again
+    assert d.phase == dk.APPROACH and "nudged for" in d.note
+    d.insert_reset()
+    assert not any(d.insert_stalled(0.011, t + 2 + k * DT) for k in range(steps))   # a fresh spell
+    d = dk.Docking(s, mover="j", now=0.0)
+    [d.insert_stalled(0.011, k * DT) for k in range(steps + 1)]
+    assert run(d, [0.002] * s.home_steps, t0=(steps + 1) * DT) is None     # home: the MPC again, not "seated":
+    assert d.phase == dk.APPROACH and "nudged home" in d.note             # Algorithm 2's test decides

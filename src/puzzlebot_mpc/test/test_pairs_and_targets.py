@@ -265,3 +265,33 @@ def test_the_grid_generator_is_two_lines_joined_by_knobs():
     for n in (3, 5, 2):
         with pytest.raises(TargetError, match="even number of robots, at least 4"):
             generate("grid", n, GEO)
+
+
+def test_a_stalled_insertion_is_nudged_and_algorithm_2_still_decides_the_coupling():
+    from puzzlebot_mpc import docking as dk
+    from puzzlebot_mpc.settings import MPCSettings
+
+    settings = MPCSettings(dock_insert_stall_time=1.0)
+    book = pr.PairBook.from_settings(GEO, settings)
+    pair = pr.make_pair("a", "o", pr.ANCHOR, GEO)
+    book.set_goals([pair])
+    poses = dict(zip(("a", "o"), opening_robot_behind(0.008)))       # the head in the mouth, 8 mm out
+    book.assign_active(poses)
+    book.movers[pair.key] = "j"                                        # the opening robot drives in
+    phases = []
+    for k in range(15):                                                # 1.5 s head_aligned, no deeper
+        assert book.update(poses, 0.1 * k) == ([], []) and pair.status == pr.HEAD_ALIGNED
+        phases.append(book.docking[pair.key].phase)
+    assert phases.index(dk.NUDGE) == 10                               # head_aligned from t = 0: nudged at 1.0 s
+    t = 1.4
+    poses["a"], poses["o"] = opening_robot_behind(0.0, lateral=0.004)  # home, but C_a 4 mm off the axis:
+    for _ in range(5):                                                 # not lined up, not coupled
+        t += 0.1
+        assert book.update(poses, t) == ([], [])
+    assert pair.status == pr.HEAD_ALIGNED and book.docking[pair.key].phase == dk.APPROACH
+    poses["a"], poses["o"] = opening_robot_behind(0.0)                 # lined up: coupled after the confirm steps
+    newly = []
+    for _ in range(settings.insert_confirm_steps):
+        t += 0.1
+        newly += book.update(poses, t)[0]
+    assert newly == [pair] and pair.key in book.coupled

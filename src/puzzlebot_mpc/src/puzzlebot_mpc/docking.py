@@ -31,6 +31,11 @@ a couple runs. The phases of one pair's manoeuvre (:class:`Docking`):
 phase      what the mover (the robot that docks) does
 =========  ==============================================================
 approach   the MPC aligns the pair (alignment cost, approach carrot)
+nudge      (``insert_by_mpc``, with ``insert_stall_time``) the MPC's
+           insertion has stalled with the head in the mouth: the mover
+           drives straight in at ``push_speed`` for ``nudge_time`` (or
+           until home), then the MPC again; Algorithm 2's lining-up test
+           still decides when the pair is coupled
 push       drives straight into the partner at ``push_speed``, holding
            the heading the partner had when the push began (the mouth and
            the anchor's free yaw do the last millimetres; chasing a partner
@@ -77,9 +82,10 @@ from typing import Optional, Tuple
 from puzzlebot_common.geometry import inverse_transform_point, transform_point
 
 APPROACH, PUSH, PULL, REPUSH, BACKOFF, SEATED = "approach", "push", "pull", "repush", "backoff", "seated"
-PHASES = (APPROACH, PUSH, PULL, REPUSH, BACKOFF, SEATED)
+NUDGE = "nudge"
+PHASES = (APPROACH, NUDGE, PUSH, PULL, REPUSH, BACKOFF, SEATED)
 #: phases in which the docking manoeuvre, not the MPC's alignment cost, drives the mover
-DRIVEN = (PUSH, PULL, REPUSH, BACKOFF)
+DRIVEN = (NUDGE, PUSH, PULL, REPUSH, BACKOFF)
 
 
 @dataclass(frozen=True)
@@ -114,6 +120,13 @@ class DockingSettings:
     #                                   stall_progress closer in this long has stalled: back off, then again
     #                                   (0: off; measured with 8 s, line8 seed 11: 1 of 8 either way)
     stall_progress: float = 0.005     # m: ... (distance of C_a from the mouth plus 20 mm per rad of heading error)
+    insert_stall_time: float = 1.0    # s: the MPC's insertion (insert_by_mpc, the head in the mouth) that has not
+    #                                   closed the gap by insert_stall_progress in this long has stalled: a
+    #                                   robot driving forwards into the anchor then drives straight in (nudge;
+    #                                   0: off; measured, docs/mpc.md "Seating")
+    insert_stall_progress: float = 0.002  # m: ...
+    nudge_time: float = 1.0           # s: the nudge drives in at push_speed for at most this long, then the MPC
+    #                                   again
     repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
@@ -123,7 +136,8 @@ class DockingSettings:
         for name in self.__dataclass_fields__:
             if name in ("pull_test", "insert_by_mpc"):
                 continue
-            value, least = getattr(self, name), 0.0 if name in ("repush_gap", "stall_time") else 1e-12
+            zero_ok = name in ("repush_gap", "stall_time", "insert_stall_time")
+            value, least = getattr(self, name), 0.0 if zero_ok else 1e-12
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
                 raise ConfigError("%s.dock_%s: must be a number > 0, got %r" % (where, name, value))
         if not self.seat_pull_min < self.seat_pull_max:
@@ -176,6 +190,9 @@ class Docking:
         self.best = None              # m: the approach's closest distance so far (approach_stalled) ...
         self.best_at = None           # s: ... and when it was reached
         self.stalls = 0               # approaches that stalled
+        self.insert_best = None       # m: the smallest gap of this head_aligned spell (insert_stalled) ...
+        self.insert_best_at = None    # s: ... and when it was reached
+        self.nudges = 0               # nudges started
 
     # ------------------------------------------------------------ helpers
     def _to(self, phase, now, note=""):
@@ -227,6 +244,34 @@ class Docking:
         self.best = self.best_at = None
         return True
 
+    def insert_stalled(self, gap, now):
+        """While the MPC inserts (the head in the mouth, ``insert_by_mpc``): True, and the ``nudge`` phase
+        begins, when the gap between the faces [m] has not closed by ``insert_stall_progress`` in
+        ``insert_stall_time``. Measured in Bullet (line8): the head in the mouth holds the relative heading,
+        the MPC turns against it at a crawl; the straight push at ``push_speed`` takes the barbs through the
+        lips."""
+        s = self.s
+        if s.insert_stall_time <= 0 or now is None or self.mover != "j":
+            return False
+        if self.insert_best is None or gap < self.insert_best - s.insert_stall_progress:
+            self.insert_best, self.insert_best_at = gap, now
+            return False
+        if now - self.insert_best_at < s.insert_stall_time:
+            return False
+        self.nudges += 1
+        self._to(NUDGE, now, "insertion stalled %.1f mm out for %.1f s: nudge %d" % (
+            1e3 * gap, now - self.insert_best_at, self.nudges))
+        self.insert_best = self.insert_best_at = None
+        return True
+
+    def end_nudge(self, now, why):
+        """The pair left head_aligned during a nudge (``why``: its status): the MPC drives it again."""
+        self._to(APPROACH, now, "nudge ended: %s" % why)
+
+    def insert_reset(self):
+        """The head is not in the mouth (or the pair jammed): the next head_aligned spell starts afresh."""
+        self.insert_best = self.insert_best_at = None
+
     def start_pull(self, gap, now):
         """The pair is pushed home (by the MPC): test it with the pull."""
         self._to(PULL, now, "pushed home")
@@ -252,7 +297,11 @@ class Docking:
         s, phase, t = self.s, self.phase, self._elapsed(now)
         home = gap <= s.home_gap
         self.home_count = self.home_count + 1 if home else 0
-        if phase == APPROACH:
+        if phase == NUDGE:
+            if self.home_count >= s.home_steps or t >= s.nudge_time - 1e-9:
+                self._to(APPROACH, now, "nudged %s" % ("home" if self.home_count >= s.home_steps else
+                                                        "for %.1f s, %.1f mm out" % (t, 1e3 * gap)))
+        elif phase == APPROACH:
             if self.ready_to_push(gap, lateral, dtheta):
                 self._to(PUSH, now, "lined up %.1f mm off axis, %.1f mm out" % (1e3 * lateral, 1e3 * gap))
             else:
@@ -307,7 +356,7 @@ class Docking:
         if self.heading_ref is None:
             self.heading_ref = partner_heading
         w = max(-1.0, min(1.0, s.push_heading_gain * math.remainder(self.heading_ref - mover_heading, 2 * math.pi)))
-        if self.phase == PUSH:
+        if self.phase in (PUSH, NUDGE):
             return Command(self.sign * s.push_speed, w)
         if self.phase == REPUSH:
             return Command(self.sign * s.repush_speed, w)

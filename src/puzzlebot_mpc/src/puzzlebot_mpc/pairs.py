@@ -56,7 +56,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from puzzlebot_common.geometry import inverse_transform_point, signed_margin, transform_point
-from puzzlebot_mpc.docking import APPROACH, BACKOFF, DRIVEN, PUSH, Docking, DockingSettings, SeatMonitor, \
+from puzzlebot_mpc.docking import APPROACH, BACKOFF, DRIVEN, NUDGE, PUSH, Docking, DockingSettings, SeatMonitor, \
     seat_measure
 
 ANCHOR, KNOB = 0, 1                                  # = puzzlebot_msgs/ConnectionPair TYPE_*
@@ -561,14 +561,22 @@ class PairBook:
             before_status, since = pair.status, pair.since
             status = update_status(pair, pi, pj, self.geometry, self.eps, self.seating, now)
             seated = False
-            if dock is not None and self.dock_settings.insert_by_mpc and dock.phase == APPROACH:
+            if dock is not None and self.dock_settings.insert_by_mpc and dock.phase in (APPROACH, NUDGE):
                 gap, lateral, dtheta = seat_measure(pair, pi, pj)
+                if dock.phase == NUDGE:          # driven straight in; Algorithm 2 still judges the pair
+                    dock.update(gap, lateral, dtheta, now)
+                    if status != HEAD_ALIGNED:
+                        dock.end_nudge(now, STATUS_NAMES[status])
                 jammed = (before_status == HEAD_ALIGNED and status == DECOUPLED and now is not None
                           and since is not None and now - since > self.seating.align_timeout)
+                if status != HEAD_ALIGNED or jammed:
+                    dock.insert_reset()
                 if jammed:                       # pushed in for align_timeout without getting home
                     dock.jammed(gap, lateral, now)
                 elif status == DECOUPLED:        # a stalled approach backs off and approaches again
                     dock.approach_stalled(gap, lateral, dtheta, now)
+                elif status == HEAD_ALIGNED and dock.phase == APPROACH:   # a stalled insertion: a nudge
+                    dock.insert_stalled(gap, now)
                 elif status == HEAD_INSERTED and self.dock_settings.pull_test:
                     dock.start_pull(gap, now)
                     status = HEAD_ALIGNED

@@ -138,6 +138,9 @@ class MPCSettings:
     dock_backoff_time: float = _DOCK.backoff_time # s
     dock_stall_time: float = _DOCK.stall_time     # s: an approach no closer in this long: back off, again (0: off)
     dock_stall_progress: float = _DOCK.stall_progress  # m: ... by this much
+    dock_insert_stall_time: float = _DOCK.insert_stall_time  # s: the MPC's insertion no deeper in this long: nudge
+    dock_insert_stall_progress: float = _DOCK.insert_stall_progress  # m: ... by this much
+    dock_nudge_time: float = _DOCK.nudge_time     # s: the nudge drives straight in at dock_push_speed this long
     dock_repair_gap: float = _DOCK.repair_gap     # m: a coupled pair with its faces this far apart ...
     dock_repair_time: float = _DOCK.repair_time   # s: ... for this long is re-seated (while a couple runs)
 
