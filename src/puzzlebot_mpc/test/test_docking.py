@@ -164,6 +164,8 @@ def test_a_stalled_insertion_is_nudged_straight_in_then_the_mpc_inserts_again():
     assert d.phase == dk.APPROACH and "nudged for" in d.note
     d.insert_reset()
     assert not any(d.insert_stalled(0.011, t + 2 + k * DT) for k in range(steps))   # a fresh spell
+    home = dk.Docking(s, mover="j", now=0.0)                              # home, not yet lined up: no nudge
+    assert not any(home.insert_stalled(0.002, k * DT) for k in range(30))
     d = dk.Docking(s, mover="j", now=0.0)
     [d.insert_stalled(0.011, k * DT) for k in range(steps + 1)]
     assert run(d, [0.002] * s.home_steps, t0=(steps + 1) * DT) is None     # home: the MPC again, not "seated":

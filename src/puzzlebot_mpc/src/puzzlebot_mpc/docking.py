@@ -246,12 +246,15 @@ class Docking:
 
     def insert_stalled(self, gap, now):
         """While the MPC inserts (the head in the mouth, ``insert_by_mpc``): True, and the ``nudge`` phase
-        begins, when the gap between the faces [m] has not closed by ``insert_stall_progress`` in
-        ``insert_stall_time``. Measured in Bullet (line8): the head in the mouth holds the relative heading,
+        begins, when the gap between the faces [m], more than ``home_gap``, has not closed by
+        ``insert_stall_progress`` in ``insert_stall_time``. Measured in Bullet (line8): the head in the mouth holds the relative heading,
         the MPC turns against it at a crawl; the straight push at ``push_speed`` takes the barbs through the
         lips."""
         s = self.s
         if s.insert_stall_time <= 0 or now is None or self.mover != "j":
+            return False
+        if gap <= s.home_gap:              # home already (not yet lined up): nothing to push
+            self.insert_reset()
             return False
         if self.insert_best is None or gap < self.insert_best - s.insert_stall_progress:
             self.insert_best, self.insert_best_at = gap, now
