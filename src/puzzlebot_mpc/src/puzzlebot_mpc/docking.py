@@ -32,10 +32,11 @@ phase      what the mover (the robot that docks) does
 =========  ==============================================================
 approach   the MPC aligns the pair (alignment cost, approach carrot)
 nudge      (``insert_by_mpc``, with ``insert_stall_time``) the MPC's
-           insertion has stalled with the head in the mouth: the mover
-           drives straight in at ``push_speed`` for ``nudge_time`` (or
-           until home), then the MPC again; Algorithm 2's lining-up test
-           still decides when the pair is coupled
+           insertion has stalled with the head in the mouth, the faces
+           not yet home: a mover driving forwards drives straight in at
+           ``push_speed`` for ``nudge_time`` (or until home), then the
+           MPC again; Algorithm 2's lining-up test still decides when the
+           pair is coupled
 push       drives straight into the partner at ``push_speed``, holding
            the heading the partner had when the push began (the mouth and
            the anchor's free yaw do the last millimetres; chasing a partner
@@ -247,9 +248,10 @@ class Docking:
     def insert_stalled(self, gap, now):
         """While the MPC inserts (the head in the mouth, ``insert_by_mpc``): True, and the ``nudge`` phase
         begins, when the gap between the faces [m], more than ``home_gap``, has not closed by
-        ``insert_stall_progress`` in ``insert_stall_time``. Measured in Bullet (line8): the head in the mouth holds the relative heading,
-        the MPC turns against it at a crawl; the straight push at ``push_speed`` takes the barbs through the
-        lips."""
+        ``insert_stall_progress`` in ``insert_stall_time``; only for a mover driving forwards ("j": a robot
+        backing its anchor in pushes a link free to turn in its holder, and jams). Measured in Bullet
+        (line8): the head in the mouth holds the relative heading, the MPC turns against it at a crawl;
+        the straight push at ``push_speed`` takes the barbs through the lips."""
         s = self.s
         if s.insert_stall_time <= 0 or now is None or self.mover != "j":
             return False
