@@ -141,7 +141,7 @@ def test_an_approach_that_comes_no_closer_backs_off_and_one_that_closes_in_does_
     for k in range(int(s.backoff_time / DT) + 1):
         d.update(0.03, 0.014, 1.0, t + k * DT)
     assert d.phase == dk.APPROACH                        # a fresh approach, its progress measured anew:
-    assert d.best_at is None or d.best_at >= steps * DT + s.backoff_time - 1e-9
+    assert d.approach_watch.best_at is None or d.approach_watch.best_at >= steps * DT + s.backoff_time - 1e-9
 
 
 def test_a_stalled_insertion_is_nudged_straight_in_then_the_mpc_inserts_again():

@@ -159,6 +159,31 @@ def seat_measure(pair, pose_i, pose_j):
             math.remainder(pose_i[2] - pose_j[2], 2 * math.pi))
 
 
+class StallWatch:
+    """A distance [m] that should shrink: stalled when it has not shrunk by ``progress`` [m] in ``time`` [s]
+    (measured from the smallest value so far)."""
+
+    def __init__(self, progress, time):
+        self.progress, self.time = progress, time
+        self.best = None              # m: the smallest value so far ...
+        self.best_at = None           # s: ... and when it was reached
+
+    def update(self, value, now):
+        """The time [s] the value has not shrunk, once that reaches ``time`` (then the watch starts afresh);
+        else None."""
+        if self.best is None or now is None or self.best_at is None or value < self.best - self.progress:
+            self.best, self.best_at = value, now
+            return None
+        waited = now - self.best_at
+        if waited < self.time:
+            return None
+        self.reset()
+        return waited
+
+    def reset(self):
+        self.best = self.best_at = None
+
+
 @dataclass
 class Command:
     """What the docking manoeuvre asks of the mover this step: body velocity (v [m/s], w [rad/s])."""
@@ -188,11 +213,9 @@ class Docking:
         self.aim = 0.0                # m: where the approach puts C_a across the opening's axis (j's frame, +y)
         self.heading_ref = None       # rad: the heading a driven phase holds (the partner's at its start)
         self.last_gap = None          # m: the gap at the previous update
-        self.best = None              # m: the approach's closest distance so far (approach_stalled) ...
-        self.best_at = None           # s: ... and when it was reached
+        self.approach_watch = StallWatch(settings.stall_progress, settings.stall_time)   # approach_stalled
         self.stalls = 0               # approaches that stalled
-        self.insert_best = None       # m: the smallest gap of this head_aligned spell (insert_stalled) ...
-        self.insert_best_at = None    # s: ... and when it was reached
+        self.insert_watch = StallWatch(settings.insert_stall_progress, settings.insert_stall_time)  # insert_stalled
         self.nudges = 0               # nudges started
 
     # ------------------------------------------------------------ helpers
@@ -221,7 +244,7 @@ class Docking:
         next approach to the side the mover was pushed (see the module docstring)."""
         self.attempts += 1
         self._aim_away(lateral)
-        self.best = self.best_at = None
+        self.approach_watch.reset()
         self.note = "insertion %d jammed (%.1f mm out, %.1f mm aside); aiming %.1f mm across" % (
             self.attempts, 1e3 * gap, 1e3 * lateral, 1e3 * self.aim)
 
@@ -234,15 +257,11 @@ class Docking:
         if s.stall_time <= 0:
             return False
         d = math.hypot(max(gap, 0.0), lateral - self.aim) + 0.02 * abs(dtheta)
-        if self.best is None or d < self.best - s.stall_progress or now is None or self.best_at is None:
-            self.best, self.best_at = d, now
-            return False
-        if now - self.best_at < s.stall_time:
+        waited = self.approach_watch.update(d, now)
+        if waited is None:
             return False
         self.stalls += 1
-        self._to(BACKOFF, now, "approach %d stalled %.0f mm away for %.0f s" % (
-            self.stalls, 1e3 * d, now - self.best_at))
-        self.best = self.best_at = None
+        self._to(BACKOFF, now, "approach %d stalled %.0f mm away for %.0f s" % (self.stalls, 1e3 * d, waited))
         return True
 
     def insert_stalled(self, gap, now):
@@ -258,15 +277,11 @@ class Docking:
         if gap <= s.home_gap:              # home already (not yet lined up): nothing to push
             self.insert_reset()
             return False
-        if self.insert_best is None or gap < self.insert_best - s.insert_stall_progress:
-            self.insert_best, self.insert_best_at = gap, now
-            return False
-        if now - self.insert_best_at < s.insert_stall_time:
+        waited = self.insert_watch.update(gap, now)
+        if waited is None:
             return False
         self.nudges += 1
-        self._to(NUDGE, now, "insertion stalled %.1f mm out for %.1f s: nudge %d" % (
-            1e3 * gap, now - self.insert_best_at, self.nudges))
-        self.insert_best = self.insert_best_at = None
+        self._to(NUDGE, now, "insertion stalled %.1f mm out for %.1f s: nudge %d" % (1e3 * gap, waited, self.nudges))
         return True
 
     def end_nudge(self, now, why):
@@ -275,7 +290,7 @@ class Docking:
 
     def insert_reset(self):
         """The head is not in the mouth (or the pair jammed): the next head_aligned spell starts afresh."""
-        self.insert_best = self.insert_best_at = None
+        self.insert_watch.reset()
 
     def start_pull(self, gap, now):
         """The pair is pushed home (by the MPC): test it with the pull."""
@@ -348,7 +363,7 @@ class Docking:
         elif phase == BACKOFF:
             if t >= s.backoff_time - 1e-9:
                 self._to(APPROACH, now, self.note)
-                self.best = self.best_at = None
+                self.approach_watch.reset()
         return False
 
     def command(self, mover_heading, partner_heading):
