@@ -98,7 +98,9 @@ class RepeatableStart(unittest.TestCase):
         print("run A: %s\nrun B: %s" % (outcome(a), outcome(b)))
         self.assertTrue(a["passed"], a["text"])
         self.assertEqual(outcome(a), outcome(b))
-        self.assertAlmostEqual(a["sim_seconds"], b["sim_seconds"], delta=0.5)   # the runner's own reading
+        # Not compared: the summary's total sim_seconds. The runner reads the clock itself at its start and
+        # end, outside lockstep, so the total carries the wall latency of those reads times the sim's
+        # real-time factor (22.93 against 23.45 s in one CI run, every step time equal).
         self.assertTrue(os.path.isfile(bag), "run B recorded no bag at %s" % bag)
         with open(runs[1].log) as f:
             self.assertIn("first poses of all 2 robot(s) at t = 0.00 s", f.read())
