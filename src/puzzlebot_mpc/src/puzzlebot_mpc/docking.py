@@ -272,7 +272,7 @@ class Docking:
         (line8): the head in the mouth holds the relative heading, the MPC turns against it at a crawl;
         the straight push at ``push_speed`` takes the barbs through the lips."""
         s = self.s
-        if s.insert_stall_time <= 0 or now is None or self.mover != "j":
+        if s.insert_stall_time <= 0 or self.mover != "j":
             return False
         if gap <= s.home_gap:              # home already (not yet lined up): nothing to push
             self.insert_reset()
@@ -289,7 +289,7 @@ class Docking:
         self._to(APPROACH, now, "nudge ended: %s" % why)
 
     def insert_reset(self):
-        """The head is not in the mouth (or the pair jammed): the next head_aligned spell starts afresh."""
+        """The head is not in the mouth: the next head_aligned spell starts afresh."""
         self.insert_watch.reset()
 
     def start_pull(self, gap, now):

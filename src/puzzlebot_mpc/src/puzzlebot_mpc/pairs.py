@@ -569,7 +569,7 @@ class PairBook:
                         dock.end_nudge(now, STATUS_NAMES[status])
                 jammed = (before_status == HEAD_ALIGNED and status == DECOUPLED and now is not None
                           and since is not None and now - since > self.seating.align_timeout)
-                if status != HEAD_ALIGNED or jammed:
+                if status != HEAD_ALIGNED:       # (a jam included: it leaves the pair decoupled)
                     dock.insert_reset()
                 if jammed:                       # pushed in for align_timeout without getting home
                     dock.jammed(gap, lateral, now)
