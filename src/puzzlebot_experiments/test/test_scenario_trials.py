@@ -6,8 +6,9 @@ import pytest
 
 from puzzlebot_common.config import shipped_config
 from puzzlebot_common.errors import ConfigError
-from puzzlebot_experiments.scenario_trials import (PairTrace, format_table, parse_pair, plot_trials, request_of,
-                                                   run_trial, scenario_steps, summarize)
+from puzzlebot_experiments.scenario_trials import (PairTrace, format_pose_ranges, format_table, held_pose_ranges,
+                                                   parse_pair, plot_trials, request_of, run_trial, scenario_steps,
+                                                   summarize)
 
 SCENARIOS = shipped_config("puzzlebot_bringup", "scenarios")
 
@@ -28,6 +29,12 @@ def test_a_pair_cycle_run_is_checked_in_bullet_step_by_step():
     assert rec["success"], rec["steps"]
     assert all(s["ok"] and not s["problems"] for s in rec["steps"])
     assert rec["failed_mpc_steps"] == 0
+    couple, drive, decouple = (s["held"] for s in rec["steps"])
+    for held in (couple, drive):                # the pair held coupled, seated, its faces together
+        assert [(h["pair"], h["seated"]) for h in held] == [("pz1-pz2", True)]
+        assert abs(held[0]["gap_mm"]) < 3.0 and abs(held[0]["lateral_mm"]) < 5.0 and abs(held[0]["dtheta"]) < 0.2
+        assert abs(held[0]["anchor_turn"]) < 0.5
+    assert decouple == []
 
 
 def test_a_traced_trial_is_the_same_trial_and_its_pair_goes_from_open_to_seated():
@@ -79,6 +86,24 @@ def test_summary_counts_why_pairs_were_not_seated():
     s = summarize([{"trial": 0, "success": False, "steps": [bad], "failed_mpc_steps": 0}], steps)
     assert s["pairs_not_seated"] == 3
     assert s["not_seated_by"] == {"a barb folded into the mouth": 2, "a barb on the lip": 1}
+
+
+def test_the_held_pairs_poses_are_summed_up_by_bullets_verdict():
+    def held(pair, seated, lateral, gap=0.1, turn=0.05):
+        return {"pair": pair, "seated": seated, "gap_mm": gap, "lateral_mm": lateral, "dtheta": 0.0,
+                "anchor_turn": turn}
+    step = {"behavior": "couple", "ok": False, "sim_seconds": 5.0, "problems": [], "coupled_pairs": 3,
+            "held": [held("pz1-pz2", True, -3.9, turn=-0.13), held("pz2-pz3", False, 1.2, gap=-0.3),
+                     held("pz3-pz4", True, 0.5, gap=0.9)]}
+    old = {"behavior": "couple", "ok": True, "sim_seconds": 5.0, "problems": [], "coupled_pairs": 3}
+    ranges = held_pose_ranges([{"steps": [step]}, {"steps": [old]}])
+    assert list(ranges) == ["seated", "not seated"]
+    assert ranges["seated"] == {"pairs": 2, "lateral_mm": (0.5, 2.2, 3.9), "gap_mm": (0.1, 0.5, 0.9),
+                                "anchor_turn": (0.05, pytest.approx(0.09), 0.13)}
+    assert ranges["not seated"]["pairs"] == 1 and ranges["not seated"]["gap_mm"] == (-0.3, -0.3, -0.3)
+    table = format_pose_ranges(ranges).splitlines()
+    assert len(table) == 4 and table[2] == "| seated | 2 | 0.5 / 2.2 / 3.9 | 0.1 / 0.5 / 0.9 | 0.05 / 0.09 / 0.13 |"
+    assert held_pose_ranges([{"steps": [old]}]) == {}
 
 
 def test_timeline_plot_is_written(tmp_path):

@@ -96,6 +96,30 @@ def physical_problems(cl, step, coupled, body_side, z_start=None):
     return problems
 
 
+def held_pairs(cl, coupled, body_side):
+    """The anchor pairs the controller holds coupled, as Bullet has them at the end of a step: a list of
+    {"pair": "A-B", "seated": bool, "gap_mm", "lateral_mm", "dtheta", "anchor_turn"}.
+
+    ``gap_mm`` (between the faces), ``lateral_mm`` (C_a from the opening's axis, in the opening robot's
+    frame) and ``dtheta`` [rad] (anchor robot's heading minus the opening robot's) are
+    :func:`puzzlebot_mpc.docking.seat_measure` of Bullet's true poses: what the controller measures, without
+    the mocap noise. ``anchor_turn`` [rad] is the anchor's yaw in its holder, which only the simulation
+    knows (the hardware has no sensor for it). Knob pairs are left out.
+    """
+    seated = {(p.anchor_robot, p.opening_robot) for p in cl.world.all_physical_pairs() if p.status == HEAD_INSERTED}
+    out = []
+    for key in coupled:
+        pair = cl.loop.pairs.find(*key)
+        if pair is None or pair.type != pr.ANCHOR:
+            continue
+        pose_i, pose_j = cl.world.pose2d(key[0]), cl.world.pose2d(key[1])
+        gap, lateral, dtheta = seat_measure(pair, pose_i, pose_j)
+        turn = anchor_in_holder(cl.world, key[0], body_side)[2]
+        out.append({"pair": "%s-%s" % key, "seated": key in seated, "gap_mm": round(1e3 * gap, 2),
+                    "lateral_mm": round(1e3 * lateral, 2), "dtheta": round(dtheta, 4), "anchor_turn": round(turn, 4)})
+    return out
+
+
 def parse_overrides(items):
     """{setting: value} of ``KEY=VALUE`` texts (values read as YAML scalars: 0.002, true, active_set);
     raises ConfigError on a malformed item or a setting MPCSettings does not have or accept."""
@@ -150,7 +174,7 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tic
             step_ok = state == SUCCEEDED and not problems
             steps.append({"behavior": step.behavior, "state": STATE_NAMES.get(state, str(state)),
                           "sim_seconds": round(elapsed, 2), "ok": step_ok, "coupled_pairs": len(coupled),
-                          "problems": problems, "message": message[:160]})
+                          "problems": problems, "message": message[:160], "held": held_pairs(cl, coupled, cfg.robot.body_side)})
             if not step_ok:
                 ok = False
                 break
@@ -270,6 +294,44 @@ def summarize(records, scenario_steps):
             "pairs_held": held, "pairs_not_seated": len(unseated), "not_seated_by": by,
             "failed_trials": sorted(r["trial"] for r in records if not r["success"]),
             "failed_mpc_steps": int(sum(r["failed_mpc_steps"] for r in records)), "steps": per_step}
+
+
+def held_pose_ranges(records):
+    """The relative poses of the pairs held coupled (the steps' ``held``, :func:`held_pairs`), split by
+    Bullet's verdict: {"seated": ..., "not seated": ...}, each with the count and (min, median, max) of
+    |lateral_mm|, gap_mm and |anchor_turn|; a verdict with no pairs is left out. Records written before
+    ``held`` was kept contribute nothing."""
+    groups = {}
+    for r in records:
+        for st in r["steps"]:
+            for h in st.get("held", []):
+                groups.setdefault("seated" if h["seated"] else "not seated", []).append(h)
+
+    def spread(values):
+        v = np.asarray(values, float)
+        v = v[np.isfinite(v)]
+        return (float(v.min()), float(np.median(v)), float(v.max())) if len(v) else None
+
+    return {verdict: {"pairs": len(hs), "lateral_mm": spread([abs(h["lateral_mm"]) for h in hs]),
+                      "gap_mm": spread([h["gap_mm"] for h in hs]),
+                      "anchor_turn": spread([abs(h["anchor_turn"]) for h in hs])}
+            for verdict, hs in sorted(groups.items(), key=lambda kv: kv[0] != "seated")}
+
+
+def format_pose_ranges(ranges):
+    """Markdown table of :func:`held_pose_ranges`: min / median / max per verdict (absolute values of the offset
+    and the turn)."""
+    rows = ["| Bullet | pairs | C_a off the axis [mm] | gap between the faces [mm] | anchor's turn in its holder "
+            "[rad] |",
+            "|---|---|---|---|---|"]
+
+    def cell(t, fmt):
+        return "-" if t is None else " / ".join(fmt % x for x in t)
+
+    for verdict, g in ranges.items():
+        rows.append("| %s | %d | %s | %s | %s |" % (verdict, g["pairs"], cell(g["lateral_mm"], "%.1f"),
+                                                      cell(g["gap_mm"], "%.1f"), cell(g["anchor_turn"], "%.2f")))
+    return "\n".join(rows)
 
 
 def scenario_steps(directory, scenario):
