@@ -81,11 +81,14 @@ def test_summary_counts_why_pairs_were_not_seated():
     problems = ["pz1-pz2 not seated (barb R folded into the mouth (3.7 mm off the axis, the lips at 4.2 mm))",
                 "pz2-pz3 not seated (barb L on the lip; barb R folded into the mouth (3.1 mm ...))",
                 "pz3-pz4 not seated (barb L folded into the mouth (2.0 mm ...))",
-                "pz1's anchor out of its holder (x 3.0 mm, yaw 0.10 rad)"]
-    bad = {"behavior": "x", "ok": False, "sim_seconds": 10.0, "problems": problems, "coupled_pairs": 3}
+                "pz1's anchor out of its holder (x 3.0 mm, yaw 0.10 rad)",
+                "pz1-pz5 not seated (the knob partly in the hole: the sides 2.0 mm apart)",
+                "pz2-pz6 not seated (the knob not at the hole)"]
+    bad = {"behavior": "x", "ok": False, "sim_seconds": 10.0, "problems": problems, "coupled_pairs": 5}
     s = summarize([{"trial": 0, "success": False, "steps": [bad], "failed_mpc_steps": 0}], steps)
-    assert s["pairs_not_seated"] == 3
-    assert s["not_seated_by"] == {"a barb folded into the mouth": 2, "a barb on the lip": 1}
+    assert s["pairs_not_seated"] == 5
+    assert s["not_seated_by"] == {"a barb folded into the mouth": 2, "a barb on the lip": 1,
+                                  "the knob partly in the hole": 1, "the knob not at the hole": 1}
 
 
 def test_the_held_pairs_poses_are_summed_up_by_bullets_verdict():

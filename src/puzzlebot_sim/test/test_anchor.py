@@ -6,7 +6,8 @@ import pytest
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_sim.anchor import AnchorGeometry, BarbTorqueMap
-from puzzlebot_sim.coupling import DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify, classify_knob, unseated_reason
+from puzzlebot_sim.coupling import (DECOUPLED, HEAD_ALIGNED, HEAD_INSERTED, classify, classify_knob, knob_reason,
+                                    unseated_reason)
 from puzzlebot_sim.params import AnchorParams, RobotParams
 
 
@@ -105,6 +106,18 @@ def test_classify_knob_states():
     assert classify_knob((0.015, face, z), p) == DECOUPLED                   # beside the hole
     assert classify_knob((0.0, face, z + 0.012), p) == DECOUPLED             # above it
     assert classify_knob((0.0, -face, z), p) == DECOUPLED                    # on the wrong side
+
+
+def test_knob_reason_names_what_is_off():
+    p = RobotParams()
+    face, z = -p.body_side / 2, p.knob_z
+    assert knob_reason((0.0, face, z), p) == ""                                    # seated
+    assert knob_reason((0.015, face, z), p) == ""                                  # not at the hole
+    assert knob_reason((0.0, face - 0.003, z), p) == "the knob partly in the hole: the sides 3.0 mm apart"
+    edge = knob_reason((0.003, face, z), p)
+    assert edge == "the knob partly in the hole: the knob 3.0 mm from the hole's centre along the side (play 0.5 mm)"
+    both = knob_reason((-0.003, face - 0.002, z), p)
+    assert both.startswith("the knob partly in the hole: the sides 2.0 mm apart; the knob 3.0 mm from")
 
 
 def test_physical_knob_pairs_message():

@@ -37,7 +37,7 @@ from puzzlebot_mpc.config_files import load_settings
 from puzzlebot_mpc.docking import seat_measure
 from puzzlebot_mpc.behaviors import FAILED, STATE_NAMES, SUCCEEDED, BehaviorRequest
 from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
-from puzzlebot_sim.coupling import (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD_ALIGNED, HEAD_INSERTED,
+from puzzlebot_sim.coupling import (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD_ALIGNED, HEAD_INSERTED, KNOB_PARTLY,
                                     STATUS_NAMES as BULLET_STATUS)
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
 from puzzlebot_sim.config import load_sim_config
@@ -49,6 +49,7 @@ from puzzlebot_bringup.scenario import parse_scenario
 SETTLE = 2.0     # s of simulated time a step may run past its own timeout before it counts as hung
 SETTLE_AT_START = 0.3  # s the robots settle on the floor before the first step
 NOT_IN_OPENING = "the anchor not in the opening"
+NOT_AT_HOLE = "the knob not at the hole"
 
 
 def world_seed(seed, trial):
@@ -78,7 +79,9 @@ def physical_problems(cl, step, coupled, body_side, z_start=None):
     problems = []
     for key in coupled:
         if physical.get(key, 0) != HEAD_INSERTED:
-            reason = found[key].reason if key in found else NOT_IN_OPENING
+            pair = cl.loop.pairs.find(*key)
+            absent = NOT_AT_HOLE if pair is not None and pair.type == pr.KNOB else NOT_IN_OPENING
+            reason = found[key].reason if key in found else absent
             problems.append("%s-%s not seated%s" % (key + (" (%s)" % reason if reason else "",)))
     if step.behavior == "decouple":
         a, b = step.pair
@@ -265,7 +268,7 @@ def run_task(task):
 
 #: why Bullet found a pair the controller held coupled not seated (summarize's ``not_seated_by``)
 UNSEATED_KINDS = tuple((words, "a barb " + words) for words in (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE)) + (
-    (NOT_IN_OPENING, NOT_IN_OPENING),)
+    (NOT_IN_OPENING, NOT_IN_OPENING), (KNOB_PARTLY, KNOB_PARTLY), (NOT_AT_HOLE, NOT_AT_HOLE))
 
 
 def unseated_kind(problem):

@@ -35,7 +35,7 @@ class PhysicalPair:
     opening_robot: str
     status: int
     knob: bool = False     # a knob-hole pair: anchor_robot carries the knob, opening_robot has the hole
-    reason: str = ""       # an anchor not seated: why (unseated_reason)
+    reason: str = ""       # not seated: why (unseated_reason; knob_reason for a knob pair)
 
     @property
     def status_name(self):
@@ -57,6 +57,7 @@ def _in_opening(p, rp, tolerance):
 
 #: why a barb tip is not seated (unseated_reason's words)
 BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE = "folded into the mouth", "on the lip", "outside the opening"
+KNOB_PARTLY = "the knob partly in the hole"   # a knob pair at its hole, not seated (knob_reason)
 
 
 def _barb_fault(tip, rp, tolerance):
@@ -121,6 +122,28 @@ def classify_knob(knob_centre, rp, tolerance=0.001):
     if not -rp.hole_depth <= gap < rp.knob_radius or abs(x) >= rp.hole_width / 2.0 + rp.knob_radius \
             or dz >= (rp.hole_height + rp.knob_height) / 2.0:
         return DECOUPLED
-    inside = (gap <= tolerance and abs(x) <= rp.hole_width / 2.0 - rp.knob_radius + tolerance
-              and dz <= (rp.hole_height - rp.knob_height) / 2.0 + tolerance)
-    return HEAD_INSERTED if inside else HEAD_ALIGNED
+    return HEAD_INSERTED if not _knob_faults(knob_centre, rp, tolerance) else HEAD_ALIGNED
+
+
+def _knob_faults(knob_centre, rp, tolerance):
+    """What keeps a knob that is at a hole (classify_knob not DECOUPLED) from being seated: a list of short
+    texts, empty when it is seated. Points as for :func:`classify_knob`."""
+    x, y, z = knob_centre
+    gap = -rp.body_side / 2.0 - y
+    play = rp.hole_width / 2.0 - rp.knob_radius
+    out = []
+    if gap > tolerance:
+        out.append("the sides %.1f mm apart" % (1e3 * gap))
+    if abs(x) > play + tolerance:
+        out.append("the knob %.1f mm from the hole's centre along the side (play %.1f mm)" % (1e3 * abs(x), 1e3 * play))
+    if abs(z - rp.knob_z) > (rp.hole_height - rp.knob_height) / 2.0 + tolerance:
+        out.append("the knob %.1f mm off the hole's height" % (1e3 * abs(z - rp.knob_z)))
+    return out
+
+
+def knob_reason(knob_centre, rp, tolerance=0.001):
+    """Why a knob at a hole is not seated (classify_knob's HEAD_ALIGNED): "the knob partly in the hole"
+    and what is off, joined by "; " ("" when seated or not at the hole). Points as for :func:`classify_knob`."""
+    if classify_knob(knob_centre, rp, tolerance) != HEAD_ALIGNED:
+        return ""
+    return "%s: %s" % (KNOB_PARTLY, "; ".join(_knob_faults(knob_centre, rp, tolerance)))

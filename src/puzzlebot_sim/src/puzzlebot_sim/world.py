@@ -574,7 +574,7 @@ class SimWorld(BulletSession):
     def physical_knob_pairs(self):
         """Knob-hole pairs read off the robots' poses (puzzlebot_sim.coupling.classify_knob).
 
-        Returns PhysicalPair(knob robot, hole robot, status, knob=True) for
+        Returns PhysicalPair(knob robot, hole robot, status, knob=True, reason) for
         every knob at least partly in a neighbour's side hole (sorted by names).
         """
         c, p = self.client, self.params
@@ -590,7 +590,8 @@ class SimWorld(BulletSession):
                 local = pb.multiplyTransforms(*inverse[h_name], knob, [0, 0, 0, 1], physicsClientId=c)[0]
                 status = coupling.classify_knob(local, p)
                 if status != coupling.DECOUPLED:
-                    out.append(coupling.PhysicalPair(k_name, h_name, status, knob=True))
+                    out.append(coupling.PhysicalPair(k_name, h_name, status, knob=True,
+                                                     reason=coupling.knob_reason(local, p)))
         return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
 
     def measure(self, name):
