@@ -490,12 +490,14 @@ class CommandPieces:
     """The grid t0 + k dt (k = 0..n) cut where commands start to act (for one delay):
     piece i lies in grid interval ``interval[i]``, lasts ``length[i]`` seconds, ends
     ``to_edge[i]`` seconds before its interval does, and carries command ``command[i]``
-    (-1: before the first command)."""
+    (-1: before the first command). ``derived``: what the integration computes from the
+    pieces alone (not from the commanded values), kept for the next call (``_derived``)."""
 
     interval: np.ndarray
     length: np.ndarray
     to_edge: np.ndarray
     command: np.ndarray
+    derived: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 def command_pieces(cmd_t, delay_s, t0, dt, n):
@@ -510,6 +512,22 @@ def command_pieces(cmd_t, delay_s, t0, dt, n):
                          command=np.searchsorted(act, start + ActuatorPlant.TIME_EPS, side="right") - 1)
 
 
+DERIVED_KEPT = 4   # entries of one kind (e.g. lag factors, one per time constant) kept with the pieces
+
+
+def _derived(p, key, compute):
+    """``compute()``, a quantity that depends on the pieces ``p`` and ``key`` only (a tuple: kind,
+    then what else it depends on), computed once and kept with the pieces (at most DERIVED_KEPT of
+    a kind; the oldest is dropped). Fits evaluate many parameter sets on the same pieces."""
+    d = p.derived
+    if key not in d:
+        same = [k for k in d if k[0] == key[0]]
+        for old in same[:max(0, len(same) - DERIVED_KEPT + 1)]:
+            del d[old]
+        d[key] = compute()
+    return d[key]
+
+
 def _targets(values, u_min, c, gain, p):
     """Target of one component per piece (deadband, friction, scale; 0 before the first command)."""
     values = np.asarray(values, dtype=float)
@@ -518,7 +536,33 @@ def _targets(values, u_min, c, gain, p):
     x = np.where(np.abs(values) < u_min, 0.0, values)
     if c > 0.0:
         x = np.sign(x) * np.maximum(0.0, np.abs(x) - c)
-    return np.where(p.command < 0, 0.0, gain * x[np.maximum(p.command, 0)])
+    before, command = _derived(p, ("command",), lambda: (p.command < 0, np.maximum(p.command, 0)))
+    return np.where(before, 0.0, gain * x[command])
+
+
+def _lag_weights(p, tau):
+    """The weights of each piece's target in the plain lag's state and integral over its grid
+    interval (time constant tau > 0 [s]), what _lag_integrals multiplies by the targets:
+    (e^-(dt - q)/tau, e^-(dt - s)/tau, weight in the interval-end state, weight in the integral of
+    y), with s and q the piece's start and end within its interval."""
+    a = np.exp(-p.to_edge / tau)          # e^-(dt - q)/tau
+    b = a * np.exp(-p.length / tau)       # e^-(dt - s)/tau
+    return a, b, a - b, p.length - tau * (a - b)
+
+
+def _lag_moment_weights(p, tau, dt):
+    """The weight of each piece's target in the integral of (s - interval start) y over its grid
+    interval (tau = 0: no lag)."""
+    length, to_edge = p.length, p.to_edge
+    q = dt - to_edge                    # piece end and start within its interval
+    s = q - length
+    if tau <= 0.0:
+        return q * q - s * s
+    a, b = _derived(p, ("lag", tau), lambda: _lag_weights(p, tau))[:2]
+    # first moment of the response to a unit step starting at s (or q), to the interval's end
+    step_s = (dt * dt - s * s) / 2.0 - (s * tau + tau * tau) * (1.0 - b) + tau * (dt - s) * b
+    step_q = (dt * dt - q * q) / 2.0 - (q * tau + tau * tau) * (1.0 - a) + tau * to_edge * a
+    return step_s - step_q
 
 
 def _lag_integrals(u, tau, p, dt, n, x0, moment):
@@ -526,57 +570,76 @@ def _lag_integrals(u, tau, p, dt, n, x0, moment):
     (s - interval start) y. Linear: the interval-end states by one recursive filter."""
     from scipy.signal import lfilter
 
-    k, length, to_edge = p.interval, p.length, p.to_edge
-    q = dt - to_edge                    # piece end and start within its interval
-    s = q - length
-    if tau <= 0.0 or n == 0:
-        i0 = np.bincount(k, u * length, minlength=n)[:n]
-        i1 = np.bincount(k, u * (q * q - s * s) / 2.0, minlength=n)[:n] if moment else None
+    k = p.interval
+    tau = tau if n > 0 else 0.0
+
+    def in_moment():
+        return _derived(p, ("lag moment", tau, dt), lambda: _lag_moment_weights(p, tau, dt))
+
+    if tau <= 0.0:
+        i0 = np.bincount(k, u * p.length, minlength=n)[:n]
+        i1 = np.bincount(k, u * in_moment() / 2.0, minlength=n)[:n] if moment else None
         return i0, i1
+    to_end, in_integral = _derived(p, ("lag", tau), lambda: _lag_weights(p, tau))[2:]
     decay = math.exp(-dt / tau)
-    a = np.exp(-to_edge / tau)          # e^-(dt - q)/tau
-    b = a * np.exp(-length / tau)       # e^-(dt - s)/tau
-    drive = np.bincount(k, u * (a - b), minlength=n)[:n]          # x(end) = decay x(start) + drive
+    drive = np.bincount(k, u * to_end, minlength=n)[:n]          # x(end) = decay x(start) + drive
     ends = lfilter([1.0], [1.0, -decay], drive, zi=[decay * x0])[0]
     starts = np.concatenate([[x0], ends[:-1]])
-    i0 = starts * tau * (1.0 - decay) + np.bincount(k, u * (length - tau * (a - b)), minlength=n)[:n]
+    i0 = starts * tau * (1.0 - decay) + np.bincount(k, u * in_integral, minlength=n)[:n]
     if not moment:
         return i0, None
-    # first moment of the response to a unit step starting at s (or q), to the interval's end
-    step_s = (dt * dt - s * s) / 2.0 - (s * tau + tau * tau) * (1.0 - b) + tau * (dt - s) * b
-    step_q = (dt * dt - q * q) / 2.0 - (q * tau + tau * tau) * (1.0 - a) + tau * to_edge * a
     free = tau * tau * (1.0 - decay) - tau * dt * decay
-    i1 = starts * free + np.bincount(k, u * (step_s - step_q), minlength=n)[:n]
+    i1 = starts * free + np.bincount(k, u * in_moment(), minlength=n)[:n]
     return i0, i1
+
+
+@dataclass(frozen=True)
+class _Segments:
+    """The pieces grouped by command (a segment: consecutive pieces of one command, a constant
+    target), what _limited_integrals needs of the pieces alone."""
+
+    first: np.ndarray      # first piece of each segment
+    lengths: list          # segment durations [s]
+    sig: np.ndarray        # from its segment's start: every piece's start, then every segment's end [s]
+    idx: np.ndarray        # ... the segment of each of these
+    end: np.ndarray        # per piece: where in sig its end is (the next piece's start, or its segment's end)
+    shift: np.ndarray      # per piece: its segment's start minus its interval's start [s]
+
+    @classmethod
+    def of(cls, p, t0, dt, n):
+        """The segments of the pieces ``p`` of the grid t0 + k dt, k = 0..n."""
+        k, length = p.interval, p.length
+        start_t = t0 + dt * (k + 1) - p.to_edge - length          # piece start times
+        new = np.ones(k.size, bool)
+        new[1:] = p.command[1:] != p.command[:-1]
+        first = np.flatnonzero(new)
+        seg = np.cumsum(new) - 1
+        seg_t0 = start_t[first]
+        seg_len = np.append(seg_t0[1:], t0 + n * dt) - seg_t0
+        n_p = k.size
+        last = np.ones(n_p, bool)
+        last[:-1] = seg[1:] != seg[:-1]                            # the last piece of its segment
+        nxt = np.minimum(np.arange(1, n_p + 1), n_p - 1)
+        return cls(first=first, lengths=seg_len.tolist(), sig=np.concatenate([start_t - seg_t0[seg], seg_len]),
+                   idx=np.concatenate([seg, np.arange(first.size)]), end=np.where(last, n_p + seg, nxt),
+                   shift=seg_t0[seg] - (t0 + dt * k))
 
 
 def _limited_integrals(u, tau, a, p, t0, dt, n, x0):
     """Lag with an acceleration limit: per grid interval, the integrals of y and of
     (s - interval start) y. Nonlinear: the state at each command's start is found command by
     command, then every piece is integrated in closed form (ramp, then exponential)."""
-    k, length = p.interval, p.length
-    start_t = t0 + dt * (k + 1) - p.to_edge - length          # piece start times
-    new = np.ones(k.size, bool)
-    new[1:] = p.command[1:] != p.command[:-1]
-    first = np.flatnonzero(new)
-    seg = np.cumsum(new) - 1
-    seg_t0 = start_t[first]
-    seg_len = np.append(seg_t0[1:], t0 + n * dt) - seg_t0
-    seg_u = u[first]
-    y0, ramp = _segment_starts(seg_u.tolist(), seg_len.tolist(), float(x0), tau, a)
+    k = p.interval
+    sg = _derived(p, ("segments", t0, dt, n), lambda: _Segments.of(p, t0, dt, n))
+    seg_u = u[sg.first]
+    y0, ramp = _segment_starts(seg_u.tolist(), sg.lengths, float(x0), tau, a)
     sign = np.sign(seg_u - y0)
     # the integrals from each segment's start to every piece start and to the segment's end, in one go
-    sig = np.concatenate([start_t - seg_t0[seg], seg_len])
-    idx = np.concatenate([seg, np.arange(first.size)])
-    f0, f1 = _segment_integrals(sig, y0[idx], seg_u[idx], ramp[idx], sign[idx], tau, a)
+    idx = sg.idx
+    f0, f1 = _segment_integrals(sg.sig, y0[idx], seg_u[idx], ramp[idx], sign[idx], tau, a)
     n_p = k.size
-    last = np.ones(n_p, bool)
-    last[:-1] = seg[1:] != seg[:-1]                            # the last piece of its segment
-    nxt = np.minimum(np.arange(1, n_p + 1), n_p - 1)
-    f0b = np.where(last, f0[n_p + seg], f0[nxt])
-    f1b = np.where(last, f1[n_p + seg], f1[nxt])
-    d0 = f0b - f0[:n_p]
-    d1 = f1b - f1[:n_p] + (seg_t0[seg] - (t0 + dt * k)) * d0      # moment about the interval's start
+    d0 = f0[sg.end] - f0[:n_p]
+    d1 = f1[sg.end] - f1[:n_p] + sg.shift * d0      # moment about the interval's start
     return np.bincount(k, d0, minlength=n)[:n], np.bincount(k, d1, minlength=n)[:n]
 
 

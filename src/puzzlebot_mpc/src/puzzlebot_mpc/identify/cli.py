@@ -22,6 +22,7 @@ from puzzlebot_mpc.identify.settings import IdentifySettings
 PROG = "identify_model"
 
 
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.print_usage(sys.stderr)
@@ -62,9 +63,26 @@ def _write(path, what, writer):
         raise DataError("cannot write the %s to %s: %s" % (what, path, e.strerror or e)) from None
 
 
+def one_blas_thread():
+    """Run the BLAS libraries numpy and scipy loaded on one thread, unless the user chose a number
+    (OPENBLAS_NUM_THREADS, OMP_NUM_THREADS). The tool's matrices are small (a few parameters x a
+    few thousand windows): a second BLAS thread does not make it faster, it spins between the
+    calls and takes a core from the main thread (on two cores: up to twice the CPU time, and
+    more wall time on a loaded machine). The results do not change. Returns the libraries set
+    (threadpoolctl's descriptions)."""
+    if "OPENBLAS_NUM_THREADS" in os.environ or "OMP_NUM_THREADS" in os.environ:
+        return []
+    import scipy.linalg  # noqa: F401  (scipy's own BLAS is loaded with it: set both)
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+    return [i for i in threadpool_info() if i["user_api"] == "blas"]
+
+
 def run(args):
     from puzzlebot_mpc.identify import core, report
 
+    one_blas_thread()
     settings = IdentifySettings.from_dict(load_yaml(args.config), where=args.config) if args.config \
         else IdentifySettings()
     progress = None if args.quiet else (lambda msg: print("%s: %s" % (PROG, msg), file=sys.stderr, flush=True))

@@ -26,6 +26,8 @@ from puzzlebot_mpc.identify.data import DataError
 
 
 PIECES_CACHE = 8      # command-piece structures kept per window set (one per recent delay value)
+PATH_CACHE = 4        # integrated turn-rate signals kept per window set (``_path``), most recent first
+POSITION_CACHE = 2    # ... and per turn-rate signal, integrated speed signals
 SERIES_LIMIT = 0.02   # rad: below this half-angle sin(x)/x is taken as 1 - x^2/6
 
 
@@ -49,6 +51,7 @@ class Windows:
     fe: np.ndarray
     cache: dict = field(default_factory=dict, repr=False)   # delay -> command pieces of the grid, and
                                                              # ("memo", delay) -> their component memo
+    paths: list = field(default_factory=list, repr=False)   # recent integrations of the grid (_path)
     part: np.ndarray = None   # cross-validation part (fold) of each window
     edges: np.ndarray = None  # time edges [s] of the parts (len = parts + 1)
 
@@ -104,7 +107,7 @@ def subset(w, mask):
     """The windows selected by a boolean mask (same grid)."""
     per_window = ("ts", "te", "p_start", "p_end", "yaw_start", "yaw_end", "ks", "fs", "ke", "fe")
     extra = {"part": w.part[mask]} if w.part is not None else {}
-    return replace(w, cache={}, **{k: getattr(w, k)[mask] for k in per_window}, **extra)
+    return replace(w, cache={}, paths=[], **{k: getattr(w, k)[mask] for k in per_window}, **extra)
 
 
 def robot_windows(r, settings):
@@ -139,13 +142,31 @@ def _pieces(r, w, delay):
     return cache[delay]
 
 
-def predict(params, r, w):
-    """Predicted measured pose at each window's end: (complex position, yaw)."""
-    pieces = _pieces(r, w, params["delay_s"])
-    memo = w.cache.setdefault(("memo", params["delay_s"]), {})
-    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n, pieces=pieces,
-                                t_start=r.t_start, memo=memo)
-    dth = om * w.dt
+def _same(a, b):
+    """Bitwise equality of two float arrays (what makes a cached integration reusable exactly)."""
+    return a is b or (a.shape == b.shape and bool((a.view(np.int64) == b.view(np.int64)).all()))
+
+
+def _cached(entries, key, size, compute):
+    """The value stored with an array equal to ``key`` (a float array) in ``entries`` (a list of
+    (sum, key, value), most recent first), or ``compute()``, stored first (at most ``size`` entries
+    kept). The sums tell most different keys apart at the cost of one sum."""
+    total = float(np.sum(key))
+    for s, k, value in entries:
+        if (s == total or s != s) and _same(k, key):
+            return value
+    value = compute()
+    entries.insert(0, (total, key, value))
+    del entries[size:]
+    return value
+
+
+def _heading(om, dt):
+    """The heading integrated on the grid from the turn rate ``om`` [rad/s] per interval of dt [s]:
+    the heading change per interval ``dth`` [rad], the cumulative heading ``theta`` at the grid
+    points (0 at the first), and the unit step of each interval (chord of the exact arc per metre
+    of path, as a complex direction)."""
+    dth = om * dt
     theta = np.concatenate([[0.0], np.cumsum(dth)])
     half = 0.5 * dth
     # exact arc per interval: chord = v dt sin(half) / half along theta + half; the series of
@@ -154,10 +175,40 @@ def predict(params, r, w):
     big = np.abs(half) >= SERIES_LIMIT
     if big.any():
         chord[big] = np.sin(half[big]) / half[big]
-    dz = v * w.dt * chord * np.exp(1j * (theta[:-1] + half))
-    c = np.concatenate([[0.0], np.cumsum(dz)])
-    dth = np.append(dth, 0.0)
-    dz = np.append(dz, 0.0)
+    return dth, theta, chord, np.exp(1j * (theta[:-1] + half))
+
+
+def _path(w, v, om):
+    """The grid integration of the velocities (v [m/s], om [rad/s], one value per grid interval):
+    per interval the heading change ``dth`` [rad] and the displacement ``dz`` [m] (complex, in the
+    frame of the grid's start), each followed by a 0 for the look-ups, and at the grid points the
+    cumulative heading ``theta`` and displacement ``c``.
+
+    Kept per window set (the last PATH_CACHE turn-rate signals, each with its last POSITION_CACHE
+    speed signals): a fit that varies only a speed parameter reuses the heading and its complex
+    exponential (the costly part), one that varies only the heading offset reuses everything.
+    Reused for bitwise equal signals only, with the same arithmetic: the results are the same."""
+    def heading():
+        dth, theta, chord, step = _heading(om, w.dt)
+        return np.append(dth, 0.0), theta, chord, step, []
+
+    dth, theta, chord, step, positions = _cached(w.paths, om, PATH_CACHE, heading)
+
+    def position():
+        dz = v * w.dt * chord * step
+        return np.append(dz, 0.0), np.concatenate([[0.0], np.cumsum(dz)])
+
+    dz, c = _cached(positions, v, POSITION_CACHE, position)
+    return dth, theta, dz, c
+
+
+def predict(params, r, w):
+    """Predicted measured pose at each window's end: (complex position, yaw)."""
+    pieces = _pieces(r, w, params["delay_s"])
+    memo = w.cache.setdefault(("memo", params["delay_s"]), {})
+    v, om = actuator_velocities(params, r.cmd_t, r.cmd_v, r.cmd_w, w.g0, w.dt, w.n, pieces=pieces,
+                                t_start=r.t_start, memo=memo)
+    dth, theta, dz, c = _path(w, v, om)
     th_s = theta[w.ks] + w.fs * dth[w.ks]
     th_e = theta[w.ke] + w.fe * dth[w.ke]
     c_s = c[w.ks] + w.fs * dz[w.ks]

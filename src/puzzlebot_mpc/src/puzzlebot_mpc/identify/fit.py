@@ -31,6 +31,7 @@ together, ``joint_threshold``).
 
 import math
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List
 
@@ -51,6 +52,9 @@ SCREEN_SCAN = 2           # screening scans every SCREEN_SCAN-th value of a star
 SCREEN_THRESHOLDS = 12    # ... and this many thresholds, at one level
 TRIES_PER_ROUND = 2       # candidates tried per round, best first
 NO_LIMIT = 0.999          # an acceleration limit fitted above this fraction of its upper bound is none
+ERRORS_CACHE = 512        # parameter sets whose window errors a RobotFit keeps (about 35 kB each at lab size):
+                          # the folds of a cross-validation start their scans from the same parameters, the two
+                          # passes of a fit rescan thresholds, the weights re-evaluate the current model
 
 
 @dataclass(frozen=True)
@@ -230,7 +234,8 @@ class RobotFit:
         self.windows = engine.robot_windows(r, settings)
         self.ctx = Context.of(r)
         self.all = np.ones(len(self.windows), bool)
-        self.nfev = 0
+        self.nfev = 0                      # model evaluations (cache misses of ``errors``)
+        self._errors = OrderedDict()       # parameter values -> errors, least recently used first
         self._thresholds = {k: threshold_bounds(getattr(r, attr), up_to_median=True)
                             for k, attr in THRESHOLDS.items()}
         self.set_weights(dict(NOMINAL))
@@ -240,9 +245,21 @@ class RobotFit:
         return self.r.name
 
     def errors(self, params):
-        """(position errors, yaw errors) of every window."""
+        """(position errors, yaw errors) of every window (read-only arrays: the last ERRORS_CACHE
+        parameter sets are remembered, a repeated one costs a look-up)."""
+        key = tuple(params[k] for k in NOMINAL)
+        cached = self._errors.get(key)
+        if cached is not None:
+            self._errors.move_to_end(key)
+            return cached
         self.nfev += 1
-        return engine.errors(params, self.r, self.windows)
+        cached = engine.errors(params, self.r, self.windows)
+        for a in cached:
+            a.flags.writeable = False
+        self._errors[key] = cached
+        if len(self._errors) > ERRORS_CACHE:
+            self._errors.popitem(last=False)
+        return cached
 
     def set_weights(self, params):
         """Weigh position and yaw errors by the RMSE of the model ``params``."""
