@@ -133,6 +133,30 @@ def test_the_seed_limit_counts_per_target_so_separate_targets_form_at_once():
     assert [p.key for p in book.assign_active(poses)] == [("a2", "a3")]
 
 
+def test_a_grid_forms_its_lines_in_parallel_then_joins_them_by_the_knob_pairs():
+    # the 2x2 bridge: chains a1-a2 and b1-b2, knob pairs a1->b1 and a2->b2 between them
+    anchors = [pr.make_pair("a1", "a2", pr.ANCHOR, GEO), pr.make_pair("b1", "b2", pr.ANCHOR, GEO)]
+    knobs = [pr.make_pair("a1", "b1", pr.KNOB, GEO), pr.make_pair("a2", "b2", pr.KNOB, GEO)]
+    poses = {n: (0.0, 0.0, 0.0) for n in ("a1", "a2", "b1", "b2")}
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1)
+    book.set_goals(knobs + anchors)                             # the knob pairs ranked first
+    # one seed per chain, both at once; no knob pair while a chain is left to form
+    assert sorted(p.key for p in book.assign_active(poses)) == [("a1", "a2"), ("b1", "b2")]
+    book.add_coupled(anchors[0])
+    book.goals.remove(anchors[0])
+    assert [p.key for p in book.assign_active(poses)] == [("b1", "b2")]      # a1, a2 idle: b's chain first
+    book.add_coupled(anchors[1])
+    book.goals.remove(anchors[1])
+    # the chains join: one knob pair at a time (the moving chain docks at one place)
+    active = book.assign_active(poses)
+    assert len(active) == 1 and active[0].type == pr.KNOB
+    # a target of knob pairs alone (a row) still seeds as before
+    row = [pr.make_pair("r1", "r2", pr.KNOB, GEO), pr.make_pair("r2", "r3", pr.KNOB, GEO)]
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1)
+    book.set_goals(row)
+    assert len(book.assign_active({n: (0.0, 0.0, 0.0) for n in ("r1", "r2", "r3")})) == 1
+
+
 def test_single_robots_grow_assemblies_first_and_an_assembly_takes_several_at_once():
     names = ["r1", "r2", "r3", "r4", "r5"]
     chain = [pr.make_pair(a, b, pr.ANCHOR, GEO) for a, b in zip(names[:-1], names[1:])]

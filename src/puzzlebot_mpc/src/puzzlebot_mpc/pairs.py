@@ -453,6 +453,10 @@ class PairBook:
         growing first, then seeding, then joining.
         A goal pair between two robots of the same assembly (closing a loop,
         e.g. the last knob pair of a grid) holds on both sides.
+        Knob pairs join finished chains: a target's chains (its anchor pairs)
+        are the targets the seed limit counts, and a knob pair waits until no
+        anchor pair is left among the goals, so a grid or a bridge forms its
+        lines in parallel first and then joins them side by side.
         """
         missing = {n for n, p in poses.items() if p is None}
         order = (lambda q: self.priority.get(q.key, 0.0)) if self.priority else None
@@ -472,7 +476,8 @@ class PairBook:
 
         keep = [q for q in ranked if (q in self.active or underway(q)) and not set(q.robots) & missing]
         keep.sort(key=lambda q: not underway(q))
-        graph = self._goal_graph() if self.max_seeds else {}
+        chains_left = any(q.type == ANCHOR for q in self.goals)
+        graph = self._goal_graph(anchors_only=chains_left) if self.max_seeds else {}
         eccentricity = self._seed_eccentricity(graph) if self.max_seeds else {}
         rest = sorted((q for q in ranked if q not in keep and not set(q.robots) & missing),
                       key=lambda q: (kinds[kind(q)], eccentricity.get(q.key, 0)))
@@ -480,10 +485,13 @@ class PairBook:
         if self.max_seeds:
             component = _components(graph)
             for g in {g for g in group_of.values() if len(g) > 1}:
-                assemblies[component[g[0]]] = assemblies.get(component[g[0]], 0) + 1
+                c = component.get(g[0], g[0])
+                assemblies[c] = assemblies.get(c, 0) + 1
         used, moving, holding, chosen = set(), set(), set(), []
         for q in keep + rest:
             if q.robot_i in used or q.robot_j in used:
+                continue
+            if q.type == KNOB and chains_left and q not in keep:
                 continue
             gi, gj = group_of[q.robot_i], group_of[q.robot_j]
             mover = mover_of(q, len(gi), len(gj)) if gi != gj else None
@@ -493,7 +501,7 @@ class PairBook:
                 continue
             if any(g in moving for g in hg):
                 continue
-            c = component.get(q.robot_i)
+            c = component.get(q.robot_i, q.robot_i)
             if q not in keep and kind(q) == "seed" and self.max_seeds and assemblies.get(c, 0) >= self.max_seeds:
                 continue
             if kind(q) == "seed":
@@ -509,11 +517,14 @@ class PairBook:
         self.active = chosen
         return self.active
 
-    def _goal_graph(self):
+    def _goal_graph(self, anchors_only=False):
         """{robot: set of neighbours} over the coupled and the goal pairs: the targets being formed (one
-        connected component per target; a couple request with groups has several)."""
+        connected component per target; a couple request with groups has several). ``anchors_only``: over
+        the anchor pairs alone, one component per chain of a target (the knob pairs join chains)."""
         edges = {}
         for q in list(self.coupled.values()) + self.goals:
+            if anchors_only and q.type != ANCHOR:
+                continue
             edges.setdefault(q.robot_i, set()).add(q.robot_j)
             edges.setdefault(q.robot_j, set()).add(q.robot_i)
         return edges
