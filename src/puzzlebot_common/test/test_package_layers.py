@@ -117,7 +117,8 @@ def test_the_checks_see_a_forbidden_import(tmp_path):
 MODULE_KEYS = {
     "numpy": "python3-numpy", "scipy": "python3-scipy", "matplotlib": "python3-matplotlib", "yaml": "python3-yaml",
     "PIL": "python3-pil", "dateutil": "python3-dateutil", "pytest": "python3-pytest", "rospkg": "python3-rospkg",
-    "casadi": "casadi", "clarabel": "clarabel", "qdldl": "qdldl", "distributed": "dask-distributed",
+    "casadi": "casadi", "clarabel": "clarabel", "qdldl": "qdldl", "threadpoolctl": "threadpoolctl",
+    "distributed": "dask-distributed",
     "dask": "dask-distributed", "pybullet": "pybullet", "pybullet_data": "pybullet",
     "rospy": "rospy", "rosgraph": "rosgraph", "roslaunch": "roslaunch", "rostest": "rostest", "rosbag": "rosbag",
     "roslz4": "rosbag", "rosunit": "rostest", "genpy": "genpy", "tf2_ros": "tf2_ros", "tf2_msgs": "tf2_msgs",
