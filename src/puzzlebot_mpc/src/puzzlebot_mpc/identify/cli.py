@@ -22,7 +22,6 @@ from puzzlebot_mpc.identify.settings import IdentifySettings
 PROG = "identify_model"
 
 
-
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.print_usage(sys.stderr)
