@@ -7,8 +7,8 @@ import pytest
 from puzzlebot_common.config import shipped_config
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_experiments.scenario_trials import (PairTrace, format_pose_ranges, format_table, held_pose_ranges,
-                                                   parse_pair, plot_trials, request_of, run_trial, scenario_steps,
-                                                   summarize)
+                                                   parse_pair, plot_trials, pull_summary, request_of, run_trial,
+                                                   scenario_steps, summarize)
 
 SCENARIOS = shipped_config("puzzlebot_bringup", "scenarios")
 
@@ -89,6 +89,28 @@ def test_summary_counts_why_pairs_were_not_seated():
     assert s["pairs_not_seated"] == 5
     assert s["not_seated_by"] == {"a barb folded into the mouth": 2, "a barb on the lip": 1,
                                   "the knob partly in the hole": 1, "the knob not at the hole": 1}
+
+
+def test_a_pull_test_pulls_the_held_pair_both_ways_and_the_run_goes_on():
+    rec = run_trial(SCENARIOS, "couple2", seed=1, trial=0, pull_test=True)
+    couple, drive = rec["steps"]
+    assert couple["ok"] and [p["pair"] for p in couple["pulls"]] == ["pz1-pz2"]
+    pull = couple["pulls"][0]
+    assert pull["before"] == "head_inserted" and pull["anchor"]["held"] and pull["opening"]["held"]
+    assert "pulls" not in drive and drive["ok"]          # the drive runs on from the state before the pulls
+    assert pull_summary([rec]) == {"seated": [2, 2]}
+
+
+def test_the_pull_summary_counts_by_verdict_and_a_folded_tips_offset():
+    def pulled(reason, held):
+        return {"pair": "a-b", "before": "head_aligned" if reason else "head_inserted", "reason": reason,
+                "anchor": {"held": held, "stretch_mm": 1.0}, "opening": {"held": False, "stretch_mm": 200.0}}
+    pulls = [pulled("", True), pulled("barb R folded into the mouth (2.3 mm off the axis, the lips at 4.2 mm); "
+                                      "barb R folded into the mouth (2.4 mm off the axis, the lips at 4.2 mm)", False),
+             pulled("barb L on the lip", True)]
+    rec = {"trial": 0, "success": False, "steps": [{"pulls": pulls}]}
+    assert pull_summary([rec]) == {"seated": [2, 1], "not seated: a barb on the lip": [2, 1],
+                                   "not seated: a barb folded into the mouth, tip 2-3 mm off the axis": [2, 0]}
 
 
 def test_the_held_pairs_poses_are_summed_up_by_bullets_verdict():

@@ -88,6 +88,14 @@ def test_why_an_anchor_in_the_opening_is_not_seated():
     assert unseated_reason(*points(head, [(h - 0.006, 0.006, z), (h - 0.006, -0.006, z)]), p) == ""
     folded = unseated_reason(*points(head, [(h - 0.006, 0.0037, z), (h - 0.006, -0.0092, z)]), p)   # traced, line8
     assert folded.startswith("barb L folded into the mouth (3.7 mm off the axis") and "R" not in folded
+    # with the tips' rounded ends: a tip 3.7 mm off the axis reaches behind the lip (4.25 mm), which catches it
+    # when pulled (scenario_trials --pull-test: such pairs held like seated ones); tips 2.3 mm off do not
+    r = AnchorParams().barb_tip_radius
+    caught = points(head, [(h - 0.006, 0.0037, z), (h - 0.006, -0.0092, z)])
+    assert unseated_reason(*caught, p, tip_radius=r) == "" and classify(*caught, p, tip_radius=r) == HEAD_INSERTED
+    both = points(head, [(h - 0.006, -0.0023, z), (h - 0.006, -0.0023, z)])    # traced, line8: both folded
+    assert unseated_reason(*both, p, tip_radius=r).count("R folded into the mouth (2.3 mm") == 2
+    assert classify(*both, p, tip_radius=r) == HEAD_ALIGNED
     on_lip = unseated_reason(*points((h - 0.005, 0.0, z), [(h - 0.001, 0.006, z), (h - 0.006, -0.006, z)]), p)
     assert on_lip == "barb L on the lip"
     out = unseated_reason(*points((h - 0.005, 0.0, z), [(h + 0.004, 0.006, z), (h + 0.004, -0.006, z)]), p)

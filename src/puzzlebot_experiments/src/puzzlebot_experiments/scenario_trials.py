@@ -24,6 +24,7 @@ measured (the mocap noise draws stay those of the untraced run), so a traced
 trial is the same trial.
 """
 
+import re
 from collections import Counter
 
 import numpy as np
@@ -40,6 +41,7 @@ from puzzlebot_experiments.closed_loop import ClosedLoop, make_world
 from puzzlebot_sim.coupling import (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD_ALIGNED, HEAD_INSERTED, KNOB_PARTLY,
                                     STATUS_NAMES as BULLET_STATUS)
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
+from puzzlebot_experiments.pull_check import PULLS, pull_pairs
 from puzzlebot_sim.config import load_sim_config
 from puzzlebot_sim.world import RobotStart
 
@@ -140,13 +142,16 @@ def parse_overrides(items):
     return out
 
 
-def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tick=None):
+def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tick=None, pull_test=False):
     """One run of ``scenario`` (from ``directory``); returns a JSON-able record.
 
     ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
     ``overrides``: MPC settings on top of mpc.yaml + mpc_sim.yaml (:func:`parse_overrides`).
     ``on_tick(cl, step_index, tick)``: called after every control tick (a :class:`PairTrace`); it
     must only read (the closed loop ``cl``, the tick's output).
+    ``pull_test``: after every couple step the controller completed, pull every anchor pair it holds
+    coupled apart, one robot at a time (:func:`puzzlebot_experiments.pull_check.pull_pairs`), recorded as
+    the step's ``pulls``; the trial then goes on from the state before the pulls, with resting anchors off.
     """
     cfg = cfg or load_sim_config(mocap=MOCAP)
     wseed = world_seed(seed, trial)
@@ -178,6 +183,9 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tic
             steps.append({"behavior": step.behavior, "state": STATE_NAMES.get(state, str(state)),
                           "sim_seconds": round(elapsed, 2), "ok": step_ok, "coupled_pairs": len(coupled),
                           "problems": problems, "message": message[:160], "held": held_pairs(cl, coupled, cfg.robot.body_side)})
+            if pull_test and step.behavior == "couple" and state == SUCCEEDED:
+                anchors = [k for k in coupled if cl.loop.pairs.find(*k).type == pr.ANCHOR]
+                steps[-1]["pulls"] = pull_pairs(cl.world, anchors)
             if not step_ok:
                 ok = False
                 break
@@ -261,9 +269,32 @@ def parse_pair(text, names=None):
 
 
 def run_task(task):
-    """run_trial for a (directory, scenario, seed, trial[, overrides]) tuple (a worker process's entry point)."""
+    """run_trial for a (directory, scenario, seed, trial[, overrides[, pull_test]]) tuple (a worker process's
+    entry point)."""
     directory, scenario, seed, trial = task[:4]
-    return run_trial(directory, scenario, seed, trial, overrides=task[4] if len(task) > 4 else None)
+    return run_trial(directory, scenario, seed, trial, overrides=task[4] if len(task) > 4 else None,
+                     pull_test=bool(task[5]) if len(task) > 5 else False)
+
+
+def pull_summary(records):
+    """The pull tests of the records (run_trial's ``pull_test``) counted by Bullet's verdict before the pull:
+    {"seated" | "not seated: <kind>": [pulls, pulls the pair held]}, each pair pulled twice (both robots);
+    a folded barb's kind also names its tip's offset from the opening's axis, in whole millimetres."""
+    out = {}
+    for r in records:
+        for st in r["steps"]:
+            for p in st.get("pulls", []):
+                kind = "seated" if not p["reason"] and p["before"] == "head_inserted" else \
+                    "not seated: %s" % (unseated_kind(p["reason"]) if p["reason"] else p["before"])
+                offset = re.search(r"folded into the mouth \(([0-9.]+) mm", p["reason"])
+                if offset and unseated_kind(p["reason"]).endswith(BARB_FOLDED):
+                    mm = int(float(offset.group(1)))
+                    kind += ", tip %d-%d mm off the axis" % (mm, mm + 1)
+                counts = out.setdefault(kind, [0, 0])
+                for driver, _ in PULLS:
+                    counts[0] += 1
+                    counts[1] += bool(p[driver]["held"])
+    return out
 
 
 #: why Bullet found a pair the controller held coupled not seated (summarize's ``not_seated_by``)

@@ -5,7 +5,9 @@ pose in the opening robot's frame (not off the robots' poses, as the MPC's
 polygon model does):
 
 * ``HEAD_INSERTED``: both barb tips are seated in the slits: behind the lips,
-  outside the mouth, inside the slit width and height;
+  inside the slit width and height, and not through the mouth: a tip's
+  rounded end (``tip_radius``) reaches behind a lip, so a pull catches it
+  there (a tip within the mouth's width draws out through it);
 * ``HEAD_ALIGNED``: the head tip is inside the opening (behind the front
   face, within the slit width and height) but the tips are not both seated;
 * ``DECOUPLED`` otherwise.
@@ -60,35 +62,37 @@ BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE = "folded into the mouth", "on the lip", 
 KNOB_PARTLY = "the knob partly in the hole"   # a knob pair at its hole, not seated (knob_reason)
 
 
-def _barb_fault(tip, rp, tolerance):
-    """None when a barb tip (opening robot's base_link [m]) is seated: in the slits, behind the lips and
-    outside the mouth; else BARB_FOLDED, BARB_ON_LIP or BARB_OUTSIDE."""
+def _barb_fault(tip, rp, tolerance, tip_radius=0.0):
+    """None when a barb tip's centre (opening robot's base_link [m]) is seated: in the slits, behind the
+    lips, its rounded end (``tip_radius`` [m]) reaching behind a lip; else BARB_FOLDED, BARB_ON_LIP or
+    BARB_OUTSIDE."""
     inside, behind = _in_opening(tip, rp, tolerance), tip[0] < rp.body_side / 2.0 - rp.lip_depth + tolerance
     if inside and behind:
-        return None if abs(tip[1]) >= rp.mouth_width / 2.0 - tolerance else BARB_FOLDED
+        return None if abs(tip[1]) + tip_radius >= rp.mouth_width / 2.0 - tolerance else BARB_FOLDED
     if inside or (tip[0] < rp.body_side / 2.0 + tolerance and abs(tip[1]) <= rp.slit_width / 2.0 + tolerance):
         return BARB_ON_LIP
     return BARB_OUTSIDE
 
 
-def classify(head_tip, barb_tips, rp, tolerance=0.0005):
+def classify(head_tip, barb_tips, rp, tolerance=0.0005, tip_radius=0.0):
     """Status of an anchor whose head tip and barb tip centres are given in the
-    opening robot's base_link (x, y, z) [m]; ``rp``: that robot's RobotParams.
+    opening robot's base_link (x, y, z) [m]; ``rp``: that robot's RobotParams;
+    ``tip_radius`` [m]: the barb tips' rounded ends (AnchorParams.barb_tip_radius).
 
     ``tolerance`` [m] absorbs contact penetration and the tips' rounding.
     """
     if not _in_opening(head_tip, rp, tolerance):
         return DECOUPLED
-    seated = all(_barb_fault(t, rp, tolerance) is None for t in barb_tips)
+    seated = all(_barb_fault(t, rp, tolerance, tip_radius) is None for t in barb_tips)
     return HEAD_INSERTED if seated else HEAD_ALIGNED
 
 
-def unseated_reason(head_tip, barb_tips, rp, tolerance=0.0005):
+def unseated_reason(head_tip, barb_tips, rp, tolerance=0.0005, tip_radius=0.0):
     """Why an anchor in an opening is not seated (classify's HEAD_ALIGNED): one short text per barb that is
     not, joined by "; " ("" when seated or not in the opening). Points as for :func:`classify`.
 
-    - "barb L folded into the mouth": its tip behind the lips but closer to the axis than the lips' inner
-      edges (a pull draws it out through the mouth);
+    - "barb L folded into the mouth": its tip behind the lips but so close to the axis that its rounded end
+      (``tip_radius``) stays within the mouth's width (a pull draws it out through the mouth);
     - "barb L on the lip": its tip not behind the lips, but within the cavity's width;
     - "barb L outside the opening" otherwise (in front of the face, beside or above the slit).
     Barbs are named L (+y) and R (-y) by which side of the opening's axis their tip is on.
@@ -97,7 +101,7 @@ def unseated_reason(head_tip, barb_tips, rp, tolerance=0.0005):
         return ""
     out = []
     for t in barb_tips:
-        fault = _barb_fault(t, rp, tolerance)
+        fault = _barb_fault(t, rp, tolerance, tip_radius)
         if fault is None:
             continue
         text = "barb %s %s" % ("L" if t[1] >= 0 else "R", fault)

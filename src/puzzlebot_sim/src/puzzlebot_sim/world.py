@@ -445,6 +445,39 @@ class SimWorld(BulletSession):
                                          physicsClientId=self.client)
         self._rest.update(poses, self.time)
 
+    # ------------------------------------------------------- saved states
+    def save_state(self):
+        """Save the Bullet state to return to with :meth:`restore_state` (experiments: tests from one state).
+
+        Every resting anchor is woken and resting is off from now on, so the
+        set of bodies stays that of the saved state. Returns a handle for restore_state."""
+        for name in self.names:
+            if self._rest.frozen(name) is not None:
+                self._rest.wake(name)
+        self._rest = NoAnchorRest()
+        return pb.saveState(physicsClientId=self.client), self.steps
+
+    def restore_state(self, saved):
+        """Return to a state of :meth:`save_state` (the bodies and the simulated time); every robot's
+        command is (0, 0) and its motors are set again at the next step."""
+        state_id, self.steps = saved
+        pb.restoreState(state_id, physicsClientId=self.client)
+        for name, robot in self.robots.items():
+            robot.wheel_targets, robot.anchor_q = None, None
+            self.set_command(name, 0.0, 0.0)
+
+    def free_wheels(self, name):
+        """Let ``name``'s wheels roll freely (motors off) until its command changes (experiments: a robot
+        pushed or pulled along by others without resisting). Without actuator effects only."""
+        robot = self.robots[name]
+        if robot.plant is not None:
+            raise RuntimeError("free_wheels: %s has actuator effects" % name)
+        robot.driven = robot.command
+        robot.wheel_targets = ("free",)
+        pb.setJointMotorControlArray(robot.body, robot.wheels, pb.VELOCITY_CONTROL,
+                                     targetVelocities=[0.0] * len(robot.wheels), forces=[0.0] * len(robot.wheels),
+                                     physicsClientId=self.client)
+
     # ------------------------------------------------------------- readouts
     def pose(self, name):
         """(position xyz [m], quaternion xyzw) of the robot's base_link in the world."""
@@ -529,6 +562,7 @@ class SimWorld(BulletSession):
             return []
         c, p = self.client, self.params
         reach = p.body_side * 1.5 + self.anchor_params.length
+        tip_radius = self.anchor_params.barb_tip_radius
         poses = {n: self.pose(n) for n in self.names}
         out = []
         for a_name in self.names:
@@ -546,9 +580,10 @@ class SimWorld(BulletSession):
                 inv_pos, inv_orn = pb.invertTransform(po, oo, physicsClientId=c)
                 local = [pb.multiplyTransforms(inv_pos, inv_orn, q, [0, 0, 0, 1], physicsClientId=c)[0]
                          for q in points]
-                status = coupling.classify(local[0], local[1:], p)
+                status = coupling.classify(local[0], local[1:], p, tip_radius=tip_radius)
                 if status != coupling.DECOUPLED or include_decoupled:
-                    reason = coupling.unseated_reason(local[0], local[1:], p) if status == coupling.HEAD_ALIGNED else ""
+                    reason = coupling.unseated_reason(local[0], local[1:], p, tip_radius=tip_radius) \
+                        if status == coupling.HEAD_ALIGNED else ""
                     out.append(coupling.PhysicalPair(a_name, o_name, status, reason=reason))
         return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
 
