@@ -29,7 +29,7 @@ PULLS = (("anchor", 1.0), ("opening", -1.0))
 
 
 def _pair_record(world, anchor_robot, opening_robot):
-    """Bullet's view of one anchor pair now: (status, reason, the barb tips' offsets from the opening's axis [m])."""
+    """Bullet's view of one anchor pair now: (status, why not seated: "" if seated or not in the opening)."""
     for p in world.physical_pairs(include_decoupled=True):
         if (p.anchor_robot, p.opening_robot) == (anchor_robot, opening_robot):
             return p.status, p.reason

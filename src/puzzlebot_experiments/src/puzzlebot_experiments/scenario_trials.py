@@ -284,10 +284,10 @@ def pull_summary(records):
     for r in records:
         for st in r["steps"]:
             for p in st.get("pulls", []):
-                kind = "seated" if not p["reason"] and p["before"] == "head_inserted" else \
-                    "not seated: %s" % (unseated_kind(p["reason"]) if p["reason"] else p["before"])
+                why = unseated_kind(p["reason"]) if p["reason"] else p["before"]
+                kind = "seated" if why == "head_inserted" else "not seated: %s" % why
                 offset = re.search(r"folded into the mouth \(([0-9.]+) mm", p["reason"])
-                if offset and unseated_kind(p["reason"]).endswith(BARB_FOLDED):
+                if offset and why.endswith(BARB_FOLDED):
                     mm = int(float(offset.group(1)))
                     kind += ", tip %d-%d mm off the axis" % (mm, mm + 1)
                 counts = out.setdefault(kind, [0, 0])

@@ -79,7 +79,7 @@ def classify(head_tip, barb_tips, rp, tolerance=0.0005, tip_radius=0.0):
     opening robot's base_link (x, y, z) [m]; ``rp``: that robot's RobotParams;
     ``tip_radius`` [m]: the barb tips' rounded ends (AnchorParams.barb_tip_radius).
 
-    ``tolerance`` [m] absorbs contact penetration and the tips' rounding.
+    ``tolerance`` [m] absorbs contact penetration.
     """
     if not _in_opening(head_tip, rp, tolerance):
         return DECOUPLED
