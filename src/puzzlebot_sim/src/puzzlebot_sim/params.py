@@ -229,6 +229,8 @@ class AnchorParams:
     #                                  (2 x URDF_MARGIN: rounded across, so it stops pitch, not yaw): the pocket's
     #                                  floor and ceiling and the retaining wall stop its pitch; 7.5 mm holds it to the
     #                                  paper's 0.1 rad but stops the wiggle (docs/sim.md)
+    roll_limit: float = 0.4          # rad, the holder stops the anchor's roll about its own x axis beyond this
+    #                                  (puzzlebot_sim/roll_stop.py; 0 = no stop)
     base_mass: float = 0.0010        # kg
     length: float = 0.0243           # m, base centre to head tip (13.3 mm out of the back face when pushed in)
     neck_x: float = 0.0075           # m, base centre to the neck joint
@@ -276,7 +278,7 @@ class AnchorParams:
             object.__setattr__(self, name, _profile(getattr(self, name), where, name))
         scalar = [f.name for f in fields(self) if not f.name.endswith(("_mm", "_n"))]
         nonneg = ("friction", "barb_friction", "head_friction", "barb_min_torque", "hinge_back",
-                  "barb_post_snap_ratio", "keel_height")
+                  "barb_post_snap_ratio", "keel_height", "roll_limit")
         _require_nonnegative(self, nonneg, where)
         require_positive(self, [n for n in scalar if n not in nonneg], where)
         for kind in ("forward", "backward"):
@@ -295,6 +297,9 @@ class AnchorParams:
             raise ConfigError("%s: need barb_fold_limit < barb_angle < pi/2 < barb_flip_limit <= pi" % where)
         if self.neck_x + self.bar_width > self.length - self.head_width:
             raise ConfigError("%s: neck_x leaves no bar between neck and head" % where)
+        if self.roll_limit >= math.pi / 2:
+            raise ConfigError("%s.roll_limit (%g rad): 0 (no stop) or below pi/2, where the anchor lies on its side"
+                              % (where, self.roll_limit))
         if self.barb_tip_radius < self.barb_thickness / 2:
             raise ConfigError("%s.barb_tip_radius: must be >= barb_thickness/2 (the tip is the contact)" % where)
         if self.hinge_back >= self.head_width / 2:

@@ -37,6 +37,7 @@ from puzzlebot_sim.anchor_rest import AnchorRest, NoAnchorRest
 from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.mocap import MocapModel
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, SimParams, WorldParams
+from puzzlebot_sim.roll_stop import AnchorRollStop
 from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
                                 robot_urdf)
 from puzzlebot_sim.worlds import WORLDS
@@ -247,6 +248,7 @@ class SimWorld(BulletSession):
                                     self.robots, self._load_anchor, self._anchor_points_of, GRAVITY)
         else:
             self._rest = NoAnchorRest()
+        self._roll_stop = AnchorRollStop(anchor_params.roll_limit if anchor_params is not None else 0.0, c)
 
     # ----------------------------------------------------------------- setup
     def _make_plant(self, name):
@@ -397,6 +399,7 @@ class SimWorld(BulletSession):
                                              physicsClientId=c)
         if self.anchor_params is not None:
             self._apply_anchor_torques()
+            self._roll_stop.apply(self.robots, self._rest.frozen)
         self._rest.apply_weights()
 
     def _apply_anchor_torques(self):
