@@ -24,8 +24,7 @@ if [ "$what" = all ] || [ "$what" = ros ]; then
   # ROS_TEST_RESULTS_DIR: tests that write files (rviz screenshot, recorded bag) put them next to the XML;
   # through env.sh like every other run, so the rostests get its pinned arithmetic (the same run per sim
   # seed on every host, docs/bringup.md)
-  ROS_TEST_RESULTS_DIR="$results" ROS_LOG_DIR="$ROOT/build/ros_log" \
-    scripts/env.sh catkin_make run_tests -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python" > build/run_tests.log 2>&1 || true
+  ROS_TEST_RESULTS_DIR="$results" scripts/env.sh catkin_make run_tests -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python" > build/run_tests.log 2>&1 || true
   grep -E "^\[Testcase|^\[.*\]\[(passed|FAILURE|ERROR)\]|RESULT:" build/run_tests.log || true
   scripts/env.sh catkin_test_results "$results" || status=1
 fi

@@ -63,13 +63,12 @@ class AnchorRollStop:
     def __init__(self, limit, client):
         self.limit = limit
         self.client = client
-        self.stops = 0                  # physics steps on which some anchor was stopped
 
     def apply(self, robots, frozen):
         """``robots``: the world's robots (``body``, ``anchor``); ``frozen(name)``: the anchor is at rest."""
         if self.limit <= 0:
             return
-        c, hit = self.client, False
+        c = self.client
         for name, robot in robots.items():
             if robot.anchor is None or frozen(name) is not None:
                 continue
@@ -84,5 +83,3 @@ class AnchorRollStop:
             omega = stopped_velocity(roll, self.limit, a_ang, r_ang, x_axis)
             if omega is not None:
                 pb.resetBaseVelocity(robot.anchor, a_lin, omega.tolist(), physicsClientId=c)
-                hit = True
-        self.stops += hit
