@@ -256,3 +256,24 @@ def test_a_pair_that_changes_status_changes_numbers_not_the_structure():
         seen.update(id(qp.solver) for qp in mpc._qps.values())
     assert len(mpc._qps) == base + 1      # one QP for the slots (0, 1), (1, 2), whatever their status
     assert len(seen) == base + 1          # and its solver was set up once, then updated
+
+
+def test_a_coupled_pair_whose_headings_straddle_pi_is_not_twisted_back_by_a_turn():
+    """A coupled pair facing -x: one robot's measured heading wraps from +pi to -pi between two steps.
+    The warm start unwraps it next to its plan; the pair's yaw rows must measure the same difference
+    (2 degrees, not 2 pi minus that), so the held pair stays at rest instead of spinning its robots
+    apart at w_max."""
+    s = MPCSettings(horizon=8, constraint_horizon=3)
+    x0 = np.zeros((2, NX))
+    x0[0, :3] = (0.0, 0.0, np.pi - 0.01)
+    x0[1, :3] = (GEO.body_side, 0.0, np.pi - 0.02)      # behind robot 0 (it faces -x), the anchor in its mouth
+    obj = Objectives.stop_all(2)
+    obj.pairs = [anchor_pair(0, 1, coupled=True)]
+    mpc = MultiRobotMPC(s, 2).setup()
+    first = mpc.make_step(x0.copy(), obj)
+    assert first.success and first.extra["max_pip_slack"] < 1e-4
+    x0[1, 2] = -np.pi + 0.015                           # robot 1 turned 0.035 rad: across the wrap
+    second = mpc.make_step(x0.copy(), obj)
+    assert second.success
+    assert second.extra["max_pip_slack"] < 1e-4
+    assert np.abs(second.commands[:, 1]).max() < 0.2 * s.w_max

@@ -451,10 +451,10 @@ class MultiRobotMPC:
         bad = [k for k in key if not (0 <= k[0] < n and 0 <= k[1] < n) or k[0] == k[1]]
         if bad:
             raise ValueError("pair slots must join two different robots of 0..%d, got %s" % (n - 1, bad))
+        Xbar, Ubar, cold = self._initial_guess(x0)     # unwraps x0's headings: before the pair data reads them
         data = qpm.pack(s, x0, objectives, pairs)
         parts = [(part, self._qp(part, data.has_edges(list(part.robots)))) for part in self._plan(key)]
         solver_s = sum(qp.solver_s for _, qp in parts)
-        Xbar, Ubar, cold = self._initial_guess(x0)
         iters = s.sqp_iterations_cold if cold else s.sqp_iterations
         pref = self._preferred_direction(x0, objectives, pairs)
         ambiguous = self._ambiguous(Xbar, objectives, pairs) if s.butterfly else []
