@@ -30,7 +30,7 @@ parameters multiplying the residuals, a pair is either active or coupled)::
     sum_k  w_control |u_k|^2
          + goal robots:     w_goal(k) |p - g|^2 + w_goal_lateral lat^2 + w_rest |(v, w)|^2
          + velocity robots: w_velocity |(v, w) - ref_k|^2
-         + pair slots:      (act W_pair(k) + coupled W_coupled) (|dp|^2, tan^2(dtheta / 2))
+         + pair slots:      (act W_pair(k) + coupled W_coupled) (|dp|^2, tan^2(dtheta / 2), linear past HEADING_KNEE)
                             + act w_pair_lateral (lat_i^2 + lat_j^2)    (k < H)
          + w_slack_pip s_pip + w_slack_butterfly s_bf + w_slack_edge s_edge   (exact L1 penalties)
 
@@ -71,6 +71,9 @@ POLY_ROWS = 4          # rows per coupling polygon (triangles get one inactive r
 YAW_ROW_SCALE = 0.025  # m/rad: heading rows of coupled pairs share the polygon rows' slack (metres)
 EDGE_ROWS = 4          # rows per robot and stage of the edge box: x_hi, -x_lo, y_hi, -y_lo
 EDGE_FREE = 1.0e3      # m: the box bound of a side without an edge (a row that never binds)
+HEADING_KNEE = 2.0     # rad: beyond this heading error a pair's tan(dtheta / 2) residual goes on as its tangent
+#                        line (slope and value bounded: a robot facing away from its partner does not make the
+#                        Gauss-Newton step spin the partner's whole assembly; :func:`heading_residual`)
 
 
 class ParamLayout:
@@ -233,7 +236,27 @@ def pair_residual_terms(xi, xj, pt_i, pt_j):
     ci = xi[0:2] + _rot(xi[2], pt_i[0:2])
     cj = xj[0:2] + _rot(xj[2], pt_j[0:2])
     dth = xi[2] + pt_i[2] - xj[2] - pt_j[2] - math.pi
-    return ci - cj, ca.tan(dth / 2)
+    return ci - cj, heading_residual(dth)
+
+
+def heading_residual(dth, lib=ca):
+    """The pair's heading residual of the error ``dth`` [rad] (any multiple of 2 pi off): tan(e / 2) of the
+    wrapped error e while |e| <= HEADING_KNEE, its tangent line at the knee beyond. ``lib``: casadi
+    (symbolic) or numpy (arrays)."""
+    e = lib.arctan2(lib.sin(dth), lib.cos(dth))
+    t_knee = math.tan(HEADING_KNEE / 2)
+    slope = 0.5 * (1.0 + t_knee * t_knee)
+    beyond = lib.sign(e) * (t_knee + slope * (lib.fabs(e) - HEADING_KNEE))
+    if lib is ca:
+        return ca.if_else(ca.fabs(e) <= HEADING_KNEE, ca.tan(e / 2), beyond)
+    return np.where(np.abs(e) <= HEADING_KNEE, np.tan(np.clip(e, -HEADING_KNEE, HEADING_KNEE) / 2), beyond)
+
+
+def heading_residual_slope(dth):
+    """d heading_residual / d dth (numpy arrays)."""
+    e = np.arctan2(np.sin(dth), np.cos(dth))
+    t = np.tan(np.clip(e, -HEADING_KNEE, HEADING_KNEE) / 2)
+    return 0.5 * (1.0 + t * t)
 
 
 def pip_rows(xi, xj, head, g, h):
