@@ -133,6 +133,24 @@ def test_the_seed_limit_counts_per_target_so_separate_targets_form_at_once():
     assert [p.key for p in book.assign_active(poses)] == [("a2", "a3")]
 
 
+def test_a_tail_seed_grows_a_line_by_robots_backing_their_anchors_in():
+    names = ["r%d" % k for k in range(1, 7)]
+    chain = [pr.make_pair(a, b, pr.ANCHOR, GEO) for a, b in zip(names[:-1], names[1:])]
+    poses = {n: (0.0, 0.0, 0.0) for n in names}
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1, seed_at="tail")
+    book.set_goals(chain)
+    assert [p.key for p in book.assign_active(poses)] == [("r5", "r6")]      # the last pair seeds
+    for k in (4, 3, 2, 1, 0):                                   # then every robot that joins backs in
+        book.add_coupled(chain[k])
+        book.goals.remove(chain[k])
+        active = book.assign_active(poses)
+        assert [p.key for p in active] == ([chain[k - 1].key] if k else [])
+        assert all(book.mover(p) == "i" for p in active)
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1)                    # the middle: the default
+    book.set_goals(chain)
+    assert [p.key for p in book.assign_active(poses)] == [("r3", "r4")]
+
+
 def test_a_grid_forms_its_lines_in_parallel_then_joins_them_by_the_knob_pairs():
     # the 2x2 bridge: chains a1-a2 and b1-b2, knob pairs a1->b1 and a2->b2 between them
     anchors = [pr.make_pair("a1", "a2", pr.ANCHOR, GEO), pr.make_pair("b1", "b2", pr.ANCHOR, GEO)]

@@ -28,6 +28,8 @@ def test_shipped_config_loads():
     ({"dt": float("nan")}, "dt"),
     ({"horizn": 3}, "unknown key"),
     ({"butterfly": 1}, "true or false"),
+    ({"assembly_seed_at": "front"}, "assembly_seed_at"),
+    ({"stage_standoff": -0.01}, "stage_standoff"),
 ])
 def test_bad_settings_raise_config_error(data, fragment):
     with pytest.raises(ConfigError) as e:
@@ -135,6 +137,39 @@ def test_a_seed_pairs_holder_only_turns_with_another_robot_close_by():
     assert holder_mask(in_front) == pytest.approx([math.sqrt(settings.hold_scale), 0.0])   # pz1 only turns
     assert holder_mask((0.5, 0.5, 0.0)) == pytest.approx([0.0, 0.0])                      # nobody near: drives
     assert holder_mask(in_front, clearance=0.0) == pytest.approx([0.0, 0.0])              # 0: always drives
+
+
+def test_a_robot_waiting_for_a_busy_partner_stands_ready_lined_up_in_front_of_it():
+    """A line grown from its tail: pz3 docks onto pz4 (backing in); pz2, whose partner pz3 is busy, drives to
+    where its anchor point is stage_standoff in front of pz3's opening, on pz3's axis; pz1 waits in place."""
+    settings = replace(MPCSettings(), assembly_seed_at="tail", stage_standoff=0.04)
+    geo = RobotGeometry()
+    L = geo.body_side
+    poses = {"pz1": (0.4, 0.05, 0.0), "pz2": (0.3, 0.05, 0.0), "pz3": (0.12, 0.0, 0.3), "pz4": (0.0, 0.0, 0.3)}
+    m = BehaviorManager(list(poses), settings)
+    m.request(BehaviorRequest("couple", list(poses), target="line", timeout=60.0), now=0.0, poses=poses)
+    m.update(0.1, poses)
+    m.pairs.add_coupled(m.pairs.goals[-1])                             # pz3->pz4 coupled: pz2 -> pz3 grows next
+    m.pairs.goals.pop()
+    m.pairs.assign_active(poses)
+    assert [p.key for p in m.pairs.active] == [("pz2", "pz3")] and m.pairs.mover(m.pairs.active[0]) == "i"
+    m.pairs.active = []                                                # stand-in for a pair still under way:
+    busy = m.pairs.find("pz3", "pz4")                                  # pz3 docking onto pz4
+    m.pairs.remove_coupled(busy.key)
+    m.pairs.goals.append(busy)
+    m.pairs.active = [busy]
+    obj = m.objectives(0.2, poses)
+    k2, k1 = m.index["pz2"], m.index["pz1"]
+    c, s = math.cos(0.3), math.sin(0.3)
+    d = L + 0.04                                                       # centre to centre, on pz3's axis
+    assert obj.goal_mask[k2] and obj.goal[k2] == pytest.approx([0.12 + d * c, d * s])
+    assert list(obj.velocity_mask[k2]) == [0.0, 0.0]
+    assert not obj.goal_mask[k1]                                       # its partner pz2 is single and idle
+    off = BehaviorManager(list(poses), replace(settings, stage_standoff=0.0))
+    off.request(BehaviorRequest("couple", list(poses), target="line", timeout=60.0), now=0.0, poses=poses)
+    off.update(0.1, poses)
+    off.pairs.active = [off.pairs.find("pz3", "pz4")]
+    assert not off.objectives(0.2, poses).goal_mask.any()              # 0: everyone waits in place
 
 
 # ------------------------------------------------- decouple: the partner turns the other way

@@ -377,13 +377,15 @@ class PairBook:
     monitors: Dict[Tuple[str, str], SeatMonitor] = field(default_factory=dict)  # coupled pair -> its watch
     repair: bool = False                 # re-seat coupled pairs found open (a couple behaviour runs)
     max_seeds: int = 0                   # sub-assemblies that may form at once per target (0: no limit)
+    seed_at: str = "middle"              # where a seed starts in its target: "middle" or "tail" (_seed_rank)
     reseats: int = 0                     # pairs sent back to be re-seated so far
 
     @classmethod
     def from_settings(cls, geometry, settings):
         """The pair book of an MPC's settings (MPCSettings: status margins, seating, docking)."""
         return cls(geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating(),
-                   dock_settings=settings.docking_settings(), max_seeds=settings.assembly_seeds)
+                   dock_settings=settings.docking_settings(), max_seeds=settings.assembly_seeds,
+                   seed_at=settings.assembly_seed_at)
 
     def assemblies(self, names):
         """{robot: its assembly (robots in ``names`` order)} over the coupled pairs, computed once per change
@@ -478,7 +480,7 @@ class PairBook:
         keep.sort(key=lambda q: not underway(q))
         chains_left = any(q.type == ANCHOR for q in self.goals)
         graph = self._goal_graph(anchors_only=chains_left) if self.max_seeds else {}
-        eccentricity = self._seed_eccentricity(graph) if self.max_seeds else {}
+        eccentricity = self._seed_rank(graph) if self.max_seeds else {}
         rest = sorted((q for q in ranked if q not in keep and not set(q.robots) & missing),
                       key=lambda q: (kinds[kind(q)], eccentricity.get(q.key, 0)))
         component, assemblies = {}, {}   # robot -> its target; target -> sub-assemblies in it (formed, forming)
@@ -528,6 +530,27 @@ class PairBook:
             edges.setdefault(q.robot_i, set()).add(q.robot_j)
             edges.setdefault(q.robot_j, set()).add(q.robot_i)
         return edges
+
+    def _seed_rank(self, edges):
+        """{goal pair key: rank} of the goal pairs as seeds, the smallest first: by eccentricity
+        (:meth:`_seed_eccentricity`) with ``seed_at`` "middle"; with "tail", by the anchor pairs that follow
+        the pair's opening robot along its chain (0: the chain's last pair, so every robot that joins the
+        chain after it is an anchor robot backing in), then by eccentricity."""
+        ecc = self._seed_eccentricity(edges)
+        if self.seed_at == "middle":
+            return ecc
+        behind = {}                      # robot -> the robot whose opening takes its anchor, along the chain
+        for q in list(self.coupled.values()) + self.goals:
+            if q.type == ANCHOR:
+                behind[q.robot_i] = q.robot_j
+        rank = {}
+        for q in self.goals:
+            steps, r, seen = 0, q.robot_j, {q.robot_i}
+            while r in behind and r not in seen:
+                seen.add(r)
+                r, steps = behind[r], steps + 1
+            rank[q.key] = (steps if q.type == ANCHOR else len(behind), ecc[q.key])
+        return rank
 
     def _seed_eccentricity(self, edges):
         """{goal pair key: hops from the pair to the farthest robot of its component of the goal graph

@@ -112,6 +112,11 @@ class MPCSettings:
                                      # stands this close to it, centre to centre (0: it always drives too)
     assembly_seeds: int = 1          # sub-assemblies a couple forms at once in each target (0: every seed
                                      # that can go; pairs.PairBook)
+    stage_standoff: float = 0.0      # m: a robot whose goal pair waits for a busy partner drives to where the
+                                     # pair's connection points are this far apart, lined up (0: it waits in
+                                     # place; behaviors/couple.py)
+    assembly_seed_at: str = "middle"  # where a chain's seed starts: "middle" (it grows at both ends) or "tail"
+                                     # (the last pair: every robot that joins backs its anchor in)
     # docking an anchor pair and proving it seated (puzzlebot_mpc/docking.py; dock_* = DockingSettings fields)
     docking: bool = True             # false: Algorithm 2 alone decides that a pair is coupled (the paper)
     dock_push_speed: float = _DOCK.push_speed     # m/s: the mover drives straight into its partner
@@ -185,12 +190,15 @@ class MPCSettings:
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral",
-                    "seed_holder_clearance"):
+                    "seed_holder_clearance", "stage_standoff"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
         if self.constraint_horizon > self.horizon:
             raise ConfigError("%s.constraint_horizon (%d) must be <= horizon (%d)"
                               % (where, self.constraint_horizon, self.horizon))
+        if self.assembly_seed_at not in ("middle", "tail"):
+            raise ConfigError("%s.assembly_seed_at: unknown place %r; known: middle, tail"
+                              % (where, self.assembly_seed_at))
         if self.solver not in ("active_set", "clarabel", "ipopt"):
             raise ConfigError("%s.solver: unknown solver %r; known: active_set, clarabel, ipopt"
                               % (where, self.solver))

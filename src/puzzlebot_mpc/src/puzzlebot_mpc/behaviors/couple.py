@@ -174,6 +174,53 @@ class Couple(Behavior):
             for m in mg:
                 obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
             obj.open_loop[ctx.index[m_robot]] = (cmd.v, cmd.w)
+        self.stage(obj, poses)
+
+    def staging(self, poses):
+        """{robot: (x, y) [m, world]}: where the robots that wait for a busy partner stand ready.
+
+        A goal pair that is not active because its partner is busy (in an
+        active pair, or part of an assembly) makes its other robot, when that
+        one is a single robot with no active pair, drive to the pose from which
+        the pair's approach is short: both headings the partner's, the
+        connection points ``stage_standoff`` apart along the partner point's
+        outward direction. A line that grows from its tail then has its next
+        robot lined up in front of the robot docking now. None with
+        ``stage_standoff`` 0.
+        """
+        s, ctx, book = self.settings, self.ctx, self.ctx.pairs
+        if s.stage_standoff <= 0:
+            return {}
+        busy = {r for q in book.active for end in q.robots for r in ctx.assembly_of(end)}
+        out = {}
+        for q in book.goals:
+            if q in book.active:
+                continue
+            for r, partner, pt_r, pt_p in ((q.robot_i, q.robot_j, q.point_i, q.point_j),
+                                           (q.robot_j, q.robot_i, q.point_j, q.point_i)):
+                if r in busy or r in out or len(ctx.assembly_of(r)) > 1:
+                    continue
+                if partner not in busy and len(ctx.assembly_of(partner)) == 1:
+                    continue
+                pose = poses.get(partner) if poses else None
+                if pose is None:
+                    continue
+                a, b = np.asarray(pt_p[:2], float), np.asarray(pt_r[:2], float)
+                norm = float(np.hypot(*a))
+                if norm <= 0:
+                    continue
+                d = a - b + s.stage_standoff * a / norm          # r's centre in the partner's frame
+                c, sn = math.cos(pose[2]), math.sin(pose[2])
+                out[r] = (pose[0] + c * d[0] - sn * d[1], pose[1] + sn * d[0] + c * d[1])
+        return out
+
+    def stage(self, obj, poses):
+        """Send the waiting robots to their staging points (:meth:`staging`) as goals."""
+        for r, point in self.staging(poses).items():
+            i = self.ctx.index[r]
+            obj.goal[i] = point
+            obj.goal_mask[i] = True
+            obj.velocity_mask[i] = 0.0
 
     def crowded(self, robot, pair_robots, poses):
         """True when a robot outside ``pair_robots`` stands within ``seed_holder_clearance`` [m] of ``robot``
