@@ -232,31 +232,29 @@ def _rot_t(th, v):
 
 
 def pair_residual_terms(xi, xj, pt_i, pt_j):
-    """(dp (2), tan(dtheta / 2)) between the aligned points of two robots."""
+    """(dp (2), heading residual (:func:`heading_residual`)) between the aligned points of two robots."""
     ci = xi[0:2] + _rot(xi[2], pt_i[0:2])
     cj = xj[0:2] + _rot(xj[2], pt_j[0:2])
     dth = xi[2] + pt_i[2] - xj[2] - pt_j[2] - math.pi
     return ci - cj, heading_residual(dth)
 
 
-def heading_residual(dth, lib=ca):
-    """The pair's heading residual of the error ``dth`` [rad] (any multiple of 2 pi off): tan(e / 2) of the
-    wrapped error e while |e| <= HEADING_KNEE, its tangent line at the knee beyond. ``lib``: casadi
-    (symbolic) or numpy (arrays)."""
-    e = lib.arctan2(lib.sin(dth), lib.cos(dth))
+def heading_residual(dth):
+    """The pair's heading residual (casadi) of the error ``dth`` [rad] (any multiple of 2 pi off): tan(e / 2)
+    of the wrapped error e while |e| <= HEADING_KNEE, its tangent line at the knee beyond."""
+    e = ca.atan2(ca.sin(dth), ca.cos(dth))
     t_knee = math.tan(HEADING_KNEE / 2)
-    slope = 0.5 * (1.0 + t_knee * t_knee)
-    beyond = lib.sign(e) * (t_knee + slope * (lib.fabs(e) - HEADING_KNEE))
-    if lib is ca:
-        return ca.if_else(ca.fabs(e) <= HEADING_KNEE, ca.tan(e / 2), beyond)
-    return np.where(np.abs(e) <= HEADING_KNEE, np.tan(np.clip(e, -HEADING_KNEE, HEADING_KNEE) / 2), beyond)
+    beyond = ca.sign(e) * (t_knee + 0.5 * (1.0 + t_knee * t_knee) * (ca.fabs(e) - HEADING_KNEE))
+    return ca.if_else(ca.fabs(e) <= HEADING_KNEE, ca.tan(e / 2), beyond)
 
 
-def heading_residual_slope(dth):
-    """d heading_residual / d dth (numpy arrays)."""
+def heading_residual_and_slope(dth):
+    """(:func:`heading_residual`, its derivative in dth) of numpy arrays, in one pass."""
     e = np.arctan2(np.sin(dth), np.cos(dth))
-    t = np.tan(np.clip(e, -HEADING_KNEE, HEADING_KNEE) / 2)
-    return 0.5 * (1.0 + t * t)
+    inside = np.clip(e, -HEADING_KNEE, HEADING_KNEE)
+    t = np.tan(inside / 2)
+    slope = 0.5 * (1.0 + t * t)
+    return t + slope * (e - inside), slope
 
 
 def pip_rows(xi, xj, head, g, h):

@@ -39,8 +39,8 @@ import scipy.sparse as sp
 
 from puzzlebot_common.geometry import polygon_halfplanes
 from puzzlebot_common.model import NU, NX
-from puzzlebot_mpc.ocp import (EDGE_FREE, EDGE_ROWS, POLY_ROWS, YAW_ROW_SCALE, OcpLayout, heading_residual,
-                               heading_residual_slope)
+from puzzlebot_mpc.ocp import (EDGE_FREE, EDGE_ROWS, POLY_ROWS, YAW_ROW_SCALE, OcpLayout,
+                               heading_residual_and_slope)
 
 # local variable order of the blocks
 _RS_VARS = 7     # robot stage k >= 1: u_{k-1} (dv, dw), x_k (px, py, theta, v, w)
@@ -542,7 +542,7 @@ class QPStructure:
         dpx = xi[:, 0] + ci * a[:, 0] - si * a[:, 1] - xj[:, 0] - cj * b[:, 0] + sj * b[:, 1]
         dpy = xi[:, 1] + si * a[:, 0] + ci * a[:, 1] - xj[:, 1] - sj * b[:, 0] - cj * b[:, 1]
         dth = xi[:, 2] + a[:, 2] - xj[:, 2] - b[:, 2] - math.pi
-        t = heading_residual(dth, np)
+        t, slope = heading_residual_and_slope(dth)
         lat_i = -si * dpx + ci * dpy
         lat_j = -sj * dpx + cj * dpy
         r = _columns(wpos * dpx, wpos * dpy, wang * t, wlat * lat_i, wlat * lat_j)
@@ -555,7 +555,7 @@ class QPStructure:
             Jdp[:, 0, 5], Jdp[:, 1, 5] = -(-sj * b[:, 0] - cj * b[:, 1]), -(cj * b[:, 0] - sj * b[:, 1])
             J = np.zeros((H * P, 5, _PS_VARS))
             J[:, 0:2] = wpos[:, None, None] * Jdp
-            dt = heading_residual_slope(dth) * wang
+            dt = slope * wang
             J[:, 2, 2], J[:, 2, 5] = dt, -dt
             J[:, 3] = -si[:, None] * Jdp[:, 0] + ci[:, None] * Jdp[:, 1]
             J[:, 3, 2] += -ci * dpx - si * dpy
