@@ -53,6 +53,18 @@ def test_a_traced_trial_is_the_same_trial_and_its_pair_goes_from_open_to_seated(
     assert table[0].startswith("| t | step | controller") and len(table) == len(rows) + 2
 
 
+def test_a_trial_runs_on_another_model_when_asked_and_records_it():
+    seen = []
+    rec = run_trial(SCENARIOS, "pair_cycle", seed=1, trial=0, model={"robot": {"caster_clearance": 0.0003}},
+                    on_tick=lambda cl, step, tick: seen.append(cl.world.params.caster_clearance))
+    assert set(seen) == {0.0003} and rec["model"] == {"robot": {"caster_clearance": 0.0003}}
+    assert "model" not in run_trial(SCENARIOS, "pair_cycle", seed=1, trial=0, on_tick=lambda cl, step, tick: (
+        seen.append(cl.world.params.caster_clearance)))
+    assert seen[-1] != 0.0003                                        # the shipped model otherwise
+    with pytest.raises(ConfigError, match="--robot"):
+        run_trial(SCENARIOS, "pair_cycle", seed=1, trial=0, model={"robot": {"caster_clearence": 0.0003}})
+
+
 def test_a_traced_pair_is_named_anchor_robot_first_among_the_scenarios_robots():
     assert parse_pair("pz7-pz8", ["pz7", "pz8"]) == ("pz7", "pz8")
     for bad in ["pz7", "pz7-", "pz7-pz7", "pz7-pz8-pz9"]:

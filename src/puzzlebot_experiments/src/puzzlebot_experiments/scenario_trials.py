@@ -26,6 +26,7 @@ trial is the same trial.
 
 import re
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 import yaml
@@ -42,7 +43,7 @@ from puzzlebot_sim.coupling import (BARB_FOLDED, BARB_ON_LIP, BARB_OUTSIDE, HEAD
                                     STATUS_NAMES as BULLET_STATUS)
 from puzzlebot_experiments.experiments import MOCAP, anchor_in_holder
 from puzzlebot_experiments.pull_check import PULLS, pull_pairs
-from puzzlebot_sim.config import load_sim_config
+from puzzlebot_sim.config import load_model, load_sim_config
 from puzzlebot_sim.world import RobotStart
 
 from puzzlebot_bringup.launch_config import sim_config
@@ -142,10 +143,13 @@ def parse_overrides(items):
     return out
 
 
-def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tick=None, pull_test=False):
+def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tick=None, pull_test=False, model=None):
     """One run of ``scenario`` (from ``directory``); returns a JSON-able record.
 
     ``cfg``: the simulation (default: as sim.launch builds it, with the lab's mocap noise).
+    ``model``: another robot and anchor model for a sensitivity study, {"robot_file": path or None,
+    "robot": {field: value}, "anchor": {field: value}} (puzzlebot_sim.config.load_model: the robot file,
+    default config/robot.yaml, with the overrides on top); recorded as ``model``.
     ``overrides``: MPC settings on top of mpc.yaml + mpc_sim.yaml (:func:`parse_overrides`).
     ``on_tick(cl, step_index, tick)``: called after every control tick (a :class:`PairTrace`); it
     must only read (the closed loop ``cl``, the tick's output).
@@ -154,6 +158,9 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tic
     the step's ``pulls``; the trial then goes on from the state before the pulls, with resting anchors off.
     """
     cfg = cfg or load_sim_config(mocap=MOCAP)
+    if model:
+        robot, anchor = load_model(model.get("robot_file"), model.get("robot"), model.get("anchor"))
+        cfg = replace(cfg, robot=robot, anchor=anchor)
     wseed = world_seed(seed, trial)
     launch = sim_config(directory, scenario, seed=wseed)
     specs = parse_robot_list(launch.robots, where="scenario %s: robots" % scenario)
@@ -196,6 +203,8 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tic
            "failed_mpc_steps": failed_steps}
     if overrides:
         rec["mpc_overrides"] = dict(overrides)
+    if model:
+        rec["model"] = {k: v for k, v in model.items() if v}
     return rec
 
 
@@ -269,11 +278,11 @@ def parse_pair(text, names=None):
 
 
 def run_task(task):
-    """run_trial for a (directory, scenario, seed, trial[, overrides[, pull_test]]) tuple (a worker process's
-    entry point)."""
+    """run_trial for a (directory, scenario, seed, trial[, overrides[, pull_test[, model]]]) tuple (a worker
+    process's entry point)."""
     directory, scenario, seed, trial = task[:4]
     return run_trial(directory, scenario, seed, trial, overrides=task[4] if len(task) > 4 else None,
-                     pull_test=bool(task[5]) if len(task) > 5 else False)
+                     pull_test=bool(task[5]) if len(task) > 5 else False, model=task[6] if len(task) > 6 else None)
 
 
 def pull_summary(records):
