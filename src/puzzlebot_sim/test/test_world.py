@@ -304,3 +304,31 @@ def test_actuator_effects_per_robot():
         assert w.driven_velocity("pz1") == (0.0, 0.0)
         assert w.driven_velocity("pz2") == pytest.approx((0.05, 0.0))
         assert w.driven_velocity("pz3") == pytest.approx((0.05, 0.0))
+
+
+def head_height_at_a_mouth(robot):
+    """A robot at rest with its anchor's head 1 mm before a partner's mouth (both on the flat floor, in a line):
+    the head tip's height [m] in the partner's frame, after 0.5 s."""
+    out = robot.body_side + 0.0133 + 0.001                    # the head 13.3 mm out of the back face (pushed in)
+    with SimWorld(robot, [RobotStart("a", 0, 0, 0), RobotStart("o", -out, 0, 0)]) as w:
+        w.run(0.5)
+        head = w.anchor_points("a")[0]
+        inv = pb.invertTransform(*w.pose("o"), physicsClientId=w.client)
+        local = pb.multiplyTransforms(*inv, head, [0, 0, 0, 1], physicsClientId=w.client)[0]
+        assert robot.body_side / 2 < local[0] < robot.body_side / 2 + 0.003   # at the mouth, not in it
+        return local[2]
+
+
+
+
+def test_at_rest_a_partners_anchor_head_meets_the_mouth_low_by_the_bodies_pitch_and_the_anchors_sag():
+    # The body rests on its wheels and one caster, pitched by caster_clearance / caster_x; two robots in a
+    # line, both pitched so, see the head below the mouth's centre line by that pitch times the distance
+    # between their centres, plus the anchor's sag in its holder. The mouth leaves the head
+    # (mouth_height - head_height) / 2 = 1.5 mm up and down (docs/sim.md, "The rest pitch").
+    p = RobotParams()
+    room = (p.mouth_height - AnchorParams().head_height) / 2
+    low = {c: p.opening_z - head_height_at_a_mouth(replace(p, caster_clearance=c)) for c in (0.0005, 0.0003)}
+    distance = p.body_side + 0.0143
+    assert low[0.0005] - low[0.0003] == pytest.approx(0.0002 / p.caster_x * distance, abs=0.0001)
+    assert low[p.caster_clearance] > room                 # the shipped model: 2.5 mm low, on the mouth's floor
