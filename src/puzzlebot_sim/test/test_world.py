@@ -306,11 +306,14 @@ def test_actuator_effects_per_robot():
         assert w.driven_velocity("pz3") == pytest.approx((0.05, 0.0))
 
 
+HEAD_OUT = 0.0133      # m: the anchor's head tip behind its robot's back face, pushed in (AnchorParams.length, its comment)
+
+
 def head_height_at_a_mouth(robot):
-    """A robot at rest with its anchor's head 1 mm before a partner's mouth (both on the flat floor, in a line):
-    the head tip's height [m] in the partner's frame, after 0.5 s."""
-    out = robot.body_side + 0.0133 + 0.001                    # the head 13.3 mm out of the back face (pushed in)
-    with SimWorld(robot, [RobotStart("a", 0, 0, 0), RobotStart("o", -out, 0, 0)]) as w:
+    """A robot at rest with its anchor's head 1 mm before a partner's mouth (both on the flat floor, in a line,
+    their centres body_side + HEAD_OUT + 1 mm apart): the head tip's height [m] in the partner's frame, after
+    0.5 s."""
+    with SimWorld(robot, [RobotStart("a", 0, 0, 0), RobotStart("o", -centres_apart(robot), 0, 0)]) as w:
         w.run(0.5)
         head = w.anchor_points("a")[0]
         inv = pb.invertTransform(*w.pose("o"), physicsClientId=w.client)
@@ -319,6 +322,9 @@ def head_height_at_a_mouth(robot):
         return local[2]
 
 
+def centres_apart(robot):
+    """m: how far apart head_height_at_a_mouth puts its two robots' centres."""
+    return robot.body_side + HEAD_OUT + 0.001
 
 
 def test_at_rest_a_partners_anchor_head_meets_the_mouth_low_by_the_bodies_pitch_and_the_anchors_sag():
@@ -329,6 +335,5 @@ def test_at_rest_a_partners_anchor_head_meets_the_mouth_low_by_the_bodies_pitch_
     p = RobotParams()
     room = (p.mouth_height - AnchorParams().head_height) / 2
     low = {c: p.opening_z - head_height_at_a_mouth(replace(p, caster_clearance=c)) for c in (0.0005, 0.0003)}
-    distance = p.body_side + 0.0143
-    assert low[0.0005] - low[0.0003] == pytest.approx(0.0002 / p.caster_x * distance, abs=0.0001)
+    assert low[0.0005] - low[0.0003] == pytest.approx(0.0002 / p.caster_x * centres_apart(p), abs=0.0001)
     assert low[p.caster_clearance] > room                 # the shipped model: 2.5 mm low, on the mouth's floor

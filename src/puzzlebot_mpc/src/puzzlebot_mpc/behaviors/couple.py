@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from puzzlebot_common.geometry import transform_point
 from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
@@ -210,8 +211,7 @@ class Couple(Behavior):
                 if norm <= 0:
                     continue
                 d = a - b + s.stage_standoff * a / norm          # r's centre in the partner's frame
-                c, sn = math.cos(pose[2]), math.sin(pose[2])
-                out[r] = (pose[0] + c * d[0] - sn * d[1], pose[1] + sn * d[0] + c * d[1])
+                out[r] = tuple(float(v) for v in transform_point(pose, d))
         return out
 
     def stage(self, obj, poses):
