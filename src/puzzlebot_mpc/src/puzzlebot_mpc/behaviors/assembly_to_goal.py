@@ -16,7 +16,12 @@ clipped to ``assembly_turn_rate``; it keeps at least MIN_SPEED_SHARE of
 that speed away from the goal, as an assembly cannot turn on the spot. The
 other members follow like the cars of a train: each drives at the
 rigid-body speed at its own position along its heading and turns towards
-the heading of the member one coupling nearer the driver (FOLLOW_GAIN).
+the heading of the member one coupling nearer the driver (FOLLOW_GAIN); a
+member whose mouth holds that member's anchor also drives CLOSE_GAIN times
+the gap between their faces beyond the setting ``dock_repair_gap`` faster,
+so an opening pair closes up (a line pulled open by its front while it
+turns levers the anchor out sideways; closing every gap would push the line
+from behind, and a line pushed so does not turn).
 These commands are sent as they are, not through the MPC's plan (see
 :meth:`AssemblyToGoal.objectives`). Robots outside the led assemblies
 hold still.
@@ -35,11 +40,14 @@ import numpy as np
 
 from puzzlebot_mpc.behaviors.base import FAILED, BehaviorError, Progress
 from puzzlebot_mpc.behaviors.go_to_goal import GoToGoal
+from puzzlebot_mpc.docking import seat_measure
+from puzzlebot_mpc.pairs import ANCHOR
 
 ASSEMBLY_TO_GOAL = "assembly_to_goal"
 LOOKAHEAD = 0.1         # m: the pursuit's carrot leads the lead's projection on its segment by this
 SLOW_RADIUS = 0.05      # m: inside this distance of its goal a lead slows down in proportion
 FOLLOW_GAIN = 1.0       # 1/s: a follower turns at this times its heading error to the member it follows
+CLOSE_GAIN = 1.0        # 1/s: a follower holding an anchor drives faster by this times the gap beyond dock_repair_gap
 MIN_SPEED_SHARE = 0.5   # of assembly_speed: the least a driver drives (outside SLOW_RADIUS) while it turns
 
 
@@ -156,9 +164,19 @@ class AssemblyToGoal(GoToGoal):
         w = max(-s.assembly_turn_rate, min(s.assembly_turn_rate, v * pursuit_curvature(pose, carrot)))
         return v, w
 
+    def gap(self, member, ahead, poses):
+        """[m] the gap between the faces of the anchor pair in which ``member``'s mouth holds ``ahead``'s
+        anchor (:func:`puzzlebot_mpc.docking.seat_measure`; negative: pressed together); 0 when they are
+        not coupled that way (``member`` carries the anchor, or a knob pair)."""
+        pair = self.ctx.pairs.coupled.get((ahead, member))
+        if pair is None or pair.type != ANCHOR:
+            return 0.0
+        return seat_measure(pair, poses[ahead], poses[member])[0]
+
     def objectives(self, obj, now, poses):
         """The commands of every led assembly, sent as they are (controller.Objectives.open_loop): the
-        driver its steering twist, every other member the rigid-body speed along its heading and a turn
+        driver its steering twist, every other member the rigid-body speed along its heading (plus the
+        close-up: CLOSE_GAIN times the gap beyond dock_repair_gap to the anchor it holds) and a turn
         towards the heading of the member it follows. The MPC's references are the same speeds (its plan
         is not what the robots get: planned with the coupling polygons, it drives the followers a little
         faster than the driver and turns them against it, and a chain pushed from behind that way does not
@@ -181,7 +199,10 @@ class AssemblyToGoal(GoToGoal):
                     obj.open_loop[i] = (float(v), float(w))
                 elif poses.get(ahead.get(m)) is not None and poses.get(m) is not None:
                     error = math.remainder(poses[ahead[m]][2] - poses[m][2], 2 * math.pi)
-                    obj.open_loop[i] = (float(vel[i, 0]), max(-s.w_max, min(s.w_max, FOLLOW_GAIN * error)))
+                    opened = self.gap(m, ahead[m], poses) - s.dock_repair_gap
+                    v_m = float(vel[i, 0]) + CLOSE_GAIN * max(0.0, opened)
+                    obj.open_loop[i] = (max(-s.v_max, min(s.v_max, v_m)),
+                                        max(-s.w_max, min(s.w_max, FOLLOW_GAIN * error)))
         obj.velocity = vel
 
 
