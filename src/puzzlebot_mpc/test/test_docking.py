@@ -1,6 +1,7 @@
 """The docking manoeuvre's phases (puzzlebot_mpc.docking), on synthetic measurements."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -158,10 +159,15 @@ def test_a_stalled_insertion_is_nudged_straight_in_then_the_mpc_inserts_again():
     assert stalled.index(True) == steps and d.phase == dk.NUDGE and d.phase in dk.DRIVEN and d.nudges == 1
     cmd = d.command(mover_heading=0.0, partner_heading=0.2)
     assert cmd.v == pytest.approx(s.push_speed) and cmd.w > 0              # straight in, towards the partner's heading
+    brace = d.brace()                                                     # the anchor robot backs into the mover
+    assert (brace.v, brace.w) == pytest.approx((-s.brace_speed, 0.0)) and s.brace_speed > 0
+    assert dk.Docking(replace(s, brace_speed=0.0), mover="j", now=0.0).brace() is None
+    d.update(s.brace_gap - 0.001, 0.0, 0.0, steps * DT)                  # the head past the lips: no brace
+    assert d.phase == dk.NUDGE and d.brace() is None
     t = steps * DT                                                        # the nudge began here
     assert run(d, [0.011] * (int(round(s.nudge_time / DT)) - 1), t0=t + DT) is None and d.phase == dk.NUDGE
     d.update(0.011, 0.0, 0.0, t + s.nudge_time + DT)                      # not home after nudge_time: the MPC again
-    assert d.phase == dk.APPROACH and "nudged for" in d.note
+    assert d.phase == dk.APPROACH and "nudged for" in d.note and d.brace() is None
     d.insert_reset()
     assert not any(d.insert_stalled(0.011, t + 2 + k * DT) for k in range(steps))   # a fresh spell
     home = dk.Docking(s, mover="j", now=0.0)                              # home, not yet lined up: no nudge

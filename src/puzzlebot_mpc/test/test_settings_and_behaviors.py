@@ -116,6 +116,75 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
     assert not [p for p in obj.pairs if p.active]
 
 
+@pytest.mark.parametrize("brace", [0.02, 0.0])
+def test_during_a_nudge_the_anchor_robots_assembly_braces(brace):
+    """A line's end robot pz2 (coupled to pz1) is docked onto by pz3 driving forwards; the insertion stalls
+    with the head at the lips, so pz3 is nudged straight in and pz2's line backs into it at
+    dock_brace_speed."""
+    settings = MPCSettings(dock_brace_speed=brace)
+    m = BehaviorManager(["pz1", "pz2", "pz3"], settings)
+    side = m.geometry.body_side
+    seated = {"pz1": (side, 0.0, 0.0), "pz2": (0.0, 0.0, 0.0)}
+    m.pairs.add_coupled(pr.make_pair("pz1", "pz2", pr.ANCHOR, m.geometry))
+    poses = dict(seated, pz3=(-0.15, 0.0, 0.0))
+    m.request(BehaviorRequest("couple", ["pz1", "pz2", "pz3"], target="line", timeout=60.0), now=0.0, poses=poses)
+    poses["pz3"] = (-side - 0.011, 0.0, 0.0)                           # the head at pz3's lips, 11 mm out
+
+    def step(now):                     # as control_loop.ControlLoop.step does
+        m.pairs.update(poses, now)
+        m.update(now, poses)
+        m.pairs.assign_active(poses)
+        return m.objectives(now, poses)
+
+    step(0.1)                                                          # pz2->pz3 becomes active ...
+    obj = step(0.2)
+    (pair,) = m.pairs.active
+    assert pair.robots == ("pz2", "pz3") and m.pairs.mover(pair) == "j" and pair.status == 1
+    assert not obj.open_loop                                           # ... head_aligned: the MPC inserts
+    for k in range(3, 3 + int(round(settings.dock_insert_stall_time / settings.dt)) + 1):
+        obj = step(0.1 * k)                                            # no deeper for insert_stall_time
+    assert m.pairs.docking[pair.key].phase == "nudge"
+    assert obj.open_loop[m.index["pz3"]] == pytest.approx((settings.dock_push_speed, 0.0))
+    for r in ("pz2", "pz1"):                                           # the whole line backs in as one body
+        if brace:
+            assert obj.open_loop[m.index[r]] == pytest.approx((-brace, 0.0))
+        else:
+            assert m.index[r] not in obj.open_loop
+
+
+def test_a_couple_does_not_succeed_while_a_coupled_pair_is_open_and_the_monitor_reseats_it():
+    """Every goal pair coupled, but pz1-pz2's faces 5 mm apart (a barb on the lip, pulled open by a robot
+    docking elsewhere): the couple runs on, the seat monitor sends the pair back to be pushed home, and the
+    couple succeeds once it is."""
+    settings = MPCSettings()
+    m = BehaviorManager(["pz1", "pz2"], settings)
+    side = m.geometry.body_side
+    pair = pr.make_pair("pz1", "pz2", pr.ANCHOR, m.geometry)
+    m.pairs.add_coupled(pair)
+    poses = {"pz1": (side + 0.005, 0.0, 0.0), "pz2": (0.0, 0.0, 0.0)}
+    m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=poses)
+
+    def step(now):                     # as control_loop.ControlLoop.step does
+        m.pairs.update(poses, now)
+        status = m.update(now, poses)
+        m.pairs.assign_active(poses)
+        return status
+
+    status = step(0.1)
+    assert status.state == RUNNING and "waiting for pz1-pz2 to close" in status.message
+    k = 2
+    while pair.key in m.pairs.coupled:                                 # the monitor: open for dock_repair_time
+        status = step(0.1 * k)
+        assert status.state == RUNNING and k < 30
+        k += 1
+    assert m.pairs.docking[pair.key].phase == "push" and m.pairs.goals == [pair]
+    poses["pz1"] = (side, 0.0, 0.0)                                    # pushed home
+    for _ in range(settings.dock_home_steps + 2):
+        status = step(0.1 * k)
+        k += 1
+    assert status.state == SUCCEEDED and pair.key in m.pairs.coupled
+
+
 def test_a_seed_pairs_holder_only_turns_with_another_robot_close_by():
     """The MPC keeps no robots apart: a holder that drove to line up would run into its neighbour."""
     settings = MPCSettings()

@@ -36,7 +36,13 @@ nudge      (``insert_by_mpc``, with ``insert_stall_time``) the MPC's
            not yet home: a mover driving forwards drives straight in at
            ``push_speed`` for ``nudge_time`` (or until home), then the
            MPC again; Algorithm 2's lining-up test still decides when the
-           pair is coupled
+           pair is coupled. Meanwhile the anchor robot *braces*: it drives
+           backwards into the mover at ``brace_speed`` until the faces
+           are ``brace_gap`` apart. A robot pushed at its tail rests nose
+           up on its rear caster, its anchor's head below the mouth of a
+           robot that drives forwards (nose up too); the brace's wheel
+           torque tips it onto its front caster and lifts the head
+           (:meth:`Docking.brace`)
 push       drives straight into the partner at ``push_speed``, holding
            the heading the partner had when the push began (the mouth and
            the anchor's free yaw do the last millimetres; chasing a partner
@@ -60,7 +66,8 @@ backoff    backs away at ``backoff_speed`` for ``backoff_time``, then
 seated     the pair is coupled (the controller's head_inserted)
 =========  ==============================================================
 
-The mover's partner (and its assembly) holds still throughout. A pair that
+The mover's partner (and its assembly) holds still throughout, but for the
+anchor robot's brace during a nudge. A pair that
 was seated and is later found open (:func:`seat_measure`: gap above
 ``repair_gap`` for ``repair_time``) is re-seated from ``push``.
 
@@ -128,6 +135,11 @@ class DockingSettings:
     insert_stall_progress: float = 0.002  # m: ...
     nudge_time: float = 1.0           # s: the nudge drives in at push_speed for at most this long, then the MPC
     #                                   again
+    brace_speed: float = 0.02         # m/s: during a nudge the anchor robot drives backwards into the mover at
+    #                                   this speed (brace; 0: off): the wheels' torque tips it onto its front
+    #                                   caster and lifts its anchor's head to the mouth (measured, docs/mpc.md)
+    brace_gap: float = 0.009          # m: ... while the faces are farther apart than this (the head not yet past
+    #                                   the lips; closer, the brace pulls its own front pair open)
     repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
@@ -137,7 +149,7 @@ class DockingSettings:
         for name in self.__dataclass_fields__:
             if name in ("pull_test", "insert_by_mpc"):
                 continue
-            zero_ok = name in ("repush_gap", "stall_time", "insert_stall_time")
+            zero_ok = name in ("repush_gap", "stall_time", "insert_stall_time", "brace_speed")
             value, least = getattr(self, name), 0.0 if zero_ok else 1e-12
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
                 raise ConfigError("%s.dock_%s: must be a number > 0, got %r" % (where, name, value))
@@ -281,6 +293,7 @@ class Docking:
         if waited is None:
             return False
         self.nudges += 1
+        self.last_gap = gap
         self._to(NUDGE, now, "insertion stalled %.1f mm out for %.1f s: nudge %d" % (1e3 * gap, waited, self.nudges))
         return True
 
@@ -385,6 +398,19 @@ class Docking:
         if self.phase == BACKOFF:
             return Command(-self.sign * s.backoff_speed, w)
         return None
+
+    def brace(self):
+        """The partner's (v, w) this step, or None (it holds): during a nudge, while the faces are more than
+        ``brace_gap`` apart (the last update's gap), the anchor robot drives backwards into the mover at
+        ``brace_speed``, straight (a nudge's mover drives forwards, so the partner is the anchor robot; see
+        the module docstring). Bracing on once the head is past the lips pulls the anchor robot's own
+        front pair open (measured: a barb left on the lip, an anchor turned out of its holder)."""
+        s = self.s
+        if self.phase != NUDGE or self.mover != "j" or s.brace_speed <= 0:
+            return None
+        if self.last_gap is not None and self.last_gap < s.brace_gap:
+            return None
+        return Command(-s.brace_speed, 0.0)
 
     def describe(self):
         return "%s%s" % (self.phase, " (%s)" % self.note if self.note else "")

@@ -115,11 +115,31 @@ class Couple(Behavior):
             pi, pj = poses.get(p.robot_i), poses.get(p.robot_j)
             errors.append(float("nan") if pi is None or pj is None else pr.alignment_error(p, pi, pj)[0])
         if not book.goals:
+            still_open = self.open_pairs(poses)
+            if still_open:                # the seat monitor re-seats them (dock_repair_time)
+                return Progress(message="all %d pair(s) coupled; waiting for %s to close" % (
+                    len(a.pairs), ", ".join(still_open)), errors=errors)
             return Progress(SUCCEEDED, "all %d pair(s) coupled after %.2f s: %s" % (
                 len(a.pairs), elapsed, ", ".join("%s->%s" % p.key for p in a.pairs)), errors)
         return Progress(message="%d of %d pair(s) coupled; active: %s" % (
             len(a.pairs) - len(book.goals), len(a.pairs),
             ", ".join(p.describe() for p in book.active) or "none"), errors=errors)
+
+    def open_pairs(self, poses):
+        """The target's coupled anchor pairs whose faces are more than ``dock_repair_gap`` apart now ("i-j"
+        names; none with docking off): the couple does not succeed while one is, since the seat monitor
+        sends such a pair back to be re-seated after ``dock_repair_time``."""
+        book = self.ctx.pairs
+        if book.dock_settings is None:
+            return []
+        out = []
+        for p in self.assignment.pairs:
+            pi, pj = poses.get(p.robot_i), poses.get(p.robot_j)
+            if p.type != pr.ANCHOR or p.key not in book.coupled or pi is None or pj is None:
+                continue
+            if dk.seat_measure(p, pi, pj)[0] > book.dock_settings.repair_gap:
+                out.append("%s-%s" % p.key)
+        return out
 
     def completion(self, errors, elapsed):
         """The share of the goal pairs coupled."""
@@ -135,7 +155,10 @@ class Couple(Behavior):
         couplings keep it together), the other side holds still (rest cost scaled by hold_scale). While
         the docking manoeuvre drives a pair (push, pull, back off), the mover gets the manoeuvre's command
         (sent as is) and the rest of its assembly the rigid-body speeds that go with it; the pair's
-        alignment cost is off (the manager marks it inactive).
+        alignment cost is off (the manager marks it inactive). During a nudge the anchor robot braces
+        (Docking.brace) and the rest of its assembly backs in with it as one body, all sent as is: the
+        anchor robot bracing alone, against its assembly's hold, pulls its own front pair open (measured,
+        docs/mpc.md "Seating").
 
         A seed pair (two single robots) lines up with both robots moving (the partner only turning when
         another robot stands within ``seed_holder_clearance``); once its anchor head is in the
@@ -175,6 +198,11 @@ class Couple(Behavior):
             for m in mg:
                 obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
             obj.open_loop[ctx.index[m_robot]] = (cmd.v, cmd.w)
+            brace = dock.brace()
+            if brace is not None:            # the anchor robot's whole assembly backs into the mover, as one body
+                braced = self.rigid_velocities(np.zeros((len(ctx.index), 2)), h_robot, brace.v, brace.w, hg, poses)
+                for m in hg:
+                    obj.open_loop[ctx.index[m]] = tuple(float(x) for x in braced[ctx.index[m]])
         self.stage(obj, poses)
 
     def staging(self, poses):
