@@ -41,6 +41,14 @@ def manager():
     return BehaviorManager(["pz1", "pz2", "pz3"], MPCSettings())
 
 
+def control_step(m, poses, now):
+    """One control step of manager ``m`` as control_loop.ControlLoop.step runs it: (status, objectives)."""
+    m.pairs.update(poses, now)
+    status = m.update(now, poses)
+    m.pairs.assign_active(poses)
+    return status, m.objectives(now, poses)
+
+
 @pytest.mark.parametrize("req, fragment", [
     (BehaviorRequest("go_to_goal", ["pz9"], [(0, 0)]), "unknown robot"),
     (BehaviorRequest("fly"), "unknown behaviour"),
@@ -89,11 +97,8 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
     settings = MPCSettings(docking=docking, dock_insert_by_mpc=not docking)
     m = BehaviorManager(["pz1", "pz2"], settings)
 
-    def step(now, poses):              # as control_loop.ControlLoop.step does
-        m.pairs.update(poses, now)
-        m.update(now, poses)
-        m.pairs.assign_active(poses)
-        return m.objectives(now, poses).velocity_mask
+    def step(now, poses):
+        return control_step(m, poses, now)[1].velocity_mask
 
     far = {"pz1": (0.0, 0.0, 0.0), "pz2": (-0.15, 0.0, 0.0)}
     m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=far)
@@ -130,11 +135,8 @@ def test_during_a_nudge_the_anchor_robots_assembly_braces(brace):
     m.request(BehaviorRequest("couple", ["pz1", "pz2", "pz3"], target="line", timeout=60.0), now=0.0, poses=poses)
     poses["pz3"] = (-side - 0.011, 0.0, 0.0)                           # the head at pz3's lips, 11 mm out
 
-    def step(now):                     # as control_loop.ControlLoop.step does
-        m.pairs.update(poses, now)
-        m.update(now, poses)
-        m.pairs.assign_active(poses)
-        return m.objectives(now, poses)
+    def step(now):
+        return control_step(m, poses, now)[1]
 
     step(0.1)                                                          # pz2->pz3 becomes active ...
     obj = step(0.2)
@@ -164,11 +166,8 @@ def test_a_couple_does_not_succeed_while_a_coupled_pair_is_open_and_the_monitor_
     poses = {"pz1": (side + 0.005, 0.0, 0.0), "pz2": (0.0, 0.0, 0.0)}
     m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="line", timeout=60.0), now=0.0, poses=poses)
 
-    def step(now):                     # as control_loop.ControlLoop.step does
-        m.pairs.update(poses, now)
-        status = m.update(now, poses)
-        m.pairs.assign_active(poses)
-        return status
+    def step(now):
+        return control_step(m, poses, now)[0]
 
     status = step(0.1)
     assert status.state == RUNNING and "waiting for pz1-pz2 to close" in status.message

@@ -36,9 +36,9 @@ nudge      (``insert_by_mpc``, with ``insert_stall_time``) the MPC's
            not yet home: a mover driving forwards drives straight in at
            ``push_speed`` for ``nudge_time`` (or until home), then the
            MPC again; Algorithm 2's lining-up test still decides when the
-           pair is coupled. Meanwhile the anchor robot *braces*: it drives
-           backwards into the mover at ``brace_speed`` until the faces
-           are ``brace_gap`` apart. A robot pushed at its tail rests nose
+           pair is coupled. Meanwhile the anchor robot *braces*: it (and
+           its assembly, as one body) drives backwards into the mover at
+           ``brace_speed`` until the faces are ``brace_gap`` apart. A robot pushed at its tail rests nose
            up on its rear caster, its anchor's head below the mouth of a
            robot that drives forwards (nose up too); the brace's wheel
            torque tips it onto its front caster and lifts the head
@@ -67,7 +67,7 @@ seated     the pair is coupled (the controller's head_inserted)
 =========  ==============================================================
 
 The mover's partner (and its assembly) holds still throughout, but for the
-anchor robot's brace during a nudge. A pair that
+brace during a nudge. A pair that
 was seated and is later found open (:func:`seat_measure`: gap above
 ``repair_gap`` for ``repair_time``) is re-seated from ``push``.
 
@@ -135,11 +135,12 @@ class DockingSettings:
     insert_stall_progress: float = 0.002  # m: ...
     nudge_time: float = 1.0           # s: the nudge drives in at push_speed for at most this long, then the MPC
     #                                   again
-    brace_speed: float = 0.02         # m/s: during a nudge the anchor robot drives backwards into the mover at
-    #                                   this speed (brace; 0: off): the wheels' torque tips it onto its front
-    #                                   caster and lifts its anchor's head to the mouth (measured, docs/mpc.md)
+    brace_speed: float = 0.02         # m/s: during a nudge the anchor robot (and its assembly) drives backwards
+    #                                   into the mover at this speed (brace; 0: off): the wheels' torque tips
+    #                                   it towards its front caster and lifts its anchor's head to the mouth
+    #                                   (measured, docs/mpc.md)
     brace_gap: float = 0.009          # m: ... while the faces are farther apart than this (the head not yet past
-    #                                   the lips; closer, the brace pulls its own front pair open)
+    #                                   the lips)
     repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
 
@@ -403,8 +404,9 @@ class Docking:
         """The partner's (v, w) this step, or None (it holds): during a nudge, while the faces are more than
         ``brace_gap`` apart (the last update's gap), the anchor robot drives backwards into the mover at
         ``brace_speed``, straight (a nudge's mover drives forwards, so the partner is the anchor robot; see
-        the module docstring). Bracing on once the head is past the lips pulls the anchor robot's own
-        front pair open (measured: a barb left on the lip, an anchor turned out of its holder)."""
+        the module docstring). The couple behaviour moves the anchor robot's assembly with it. Measured
+        with the anchor robot alone, bracing on once the head was past the lips pulled its own front pair
+        open (a barb left on the lip, an anchor turned out of its holder)."""
         s = self.s
         if self.phase != NUDGE or self.mover != "j" or s.brace_speed <= 0:
             return None

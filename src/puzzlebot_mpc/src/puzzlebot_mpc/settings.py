@@ -146,7 +146,7 @@ class MPCSettings:
     dock_insert_stall_time: float = _DOCK.insert_stall_time  # s: the MPC's insertion no deeper in this long: nudge
     dock_insert_stall_progress: float = _DOCK.insert_stall_progress  # m: ... by this much
     dock_nudge_time: float = _DOCK.nudge_time     # s: the nudge drives straight in at dock_push_speed this long
-    dock_brace_speed: float = _DOCK.brace_speed   # m/s: ... while the anchor robot backs into it at this speed (0: off)
+    dock_brace_speed: float = _DOCK.brace_speed   # m/s: ... while the anchor robot's assembly backs into it (0: off)
     dock_brace_gap: float = _DOCK.brace_gap       # m: ... until the faces are this close
     dock_repair_gap: float = _DOCK.repair_gap     # m: a coupled pair with its faces this far apart ...
     dock_repair_time: float = _DOCK.repair_time   # s: ... for this long is re-seated (while a couple runs)
