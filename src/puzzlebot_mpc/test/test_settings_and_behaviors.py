@@ -121,7 +121,7 @@ def test_seed_pair_partner_holds_while_the_mover_pushes_the_anchor_home(docking)
     assert not [p for p in obj.pairs if p.active]
 
 
-@pytest.mark.parametrize("brace", [0.02, 0.0])
+@pytest.mark.parametrize("brace", [MPCSettings().dock_brace_speed, 0.0])
 def test_during_a_nudge_the_anchor_robots_assembly_braces(brace):
     """A line's end robot pz2 (coupled to pz1) is docked onto by pz3 driving forwards; the insertion stalls
     with the head at the lips, so pz3 is nudged straight in and pz2's line backs into it at

@@ -135,7 +135,7 @@ class DockingSettings:
     insert_stall_progress: float = 0.002  # m: ...
     nudge_time: float = 1.0           # s: the nudge drives in at push_speed for at most this long, then the MPC
     #                                   again
-    brace_speed: float = 0.02         # m/s: during a nudge the anchor robot (and its assembly) drives backwards
+    brace_speed: float = 0.04         # m/s: during a nudge the anchor robot (and its assembly) drives backwards
     #                                   into the mover at this speed (brace; 0: off): the wheels' torque tips
     #                                   it towards its front caster and lifts its anchor's head to the mouth
     #                                   (measured, docs/mpc.md)
