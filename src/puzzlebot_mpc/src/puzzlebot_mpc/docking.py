@@ -38,11 +38,11 @@ nudge      (``insert_by_mpc``, with ``insert_stall_time``) the MPC's
            MPC again; Algorithm 2's lining-up test still decides when the
            pair is coupled. Meanwhile the anchor robot *braces*: it (and
            its assembly, as one body) drives backwards into the mover at
-           ``brace_speed`` until the faces are ``brace_gap`` apart. A robot pushed at its tail rests nose
-           up on its rear caster, its anchor's head below the mouth of a
-           robot that drives forwards (nose up too); the brace's wheel
-           torque tips it onto its front caster and lifts the head
-           (:meth:`Docking.brace`)
+           ``brace_speed`` until the faces are ``brace_gap`` apart. A
+           robot pushed at its tail rests nose up on its rear caster, its
+           anchor's head below the mouth of a robot that drives forwards
+           (nose up too); the brace's wheel torque tips it onto its front
+           caster and lifts the head (:meth:`Docking.brace`)
 push       drives straight into the partner at ``push_speed``, holding
            the heading the partner had when the push began (the mouth and
            the anchor's free yaw do the last millimetres; chasing a partner
@@ -67,9 +67,9 @@ seated     the pair is coupled (the controller's head_inserted)
 =========  ==============================================================
 
 The mover's partner (and its assembly) holds still throughout, but for the
-brace during a nudge. A pair that
-was seated and is later found open (:func:`seat_measure`: gap above
-``repair_gap`` for ``repair_time``) is re-seated from ``push``.
+brace during a nudge. A pair that was seated and is later found open
+(:func:`seat_measure`: gap above ``repair_gap`` for ``repair_time``) is
+re-seated from ``push``.
 
 The seated band is a property of the anchor and its holder: in the Bullet
 model a seated pair stretches 9.0-12.3 mm before it stalls; a barb folded
