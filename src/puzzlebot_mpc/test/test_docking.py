@@ -145,6 +145,30 @@ def test_an_approach_that_comes_no_closer_backs_off_and_one_that_closes_in_does_
     assert d.approach_watch.best_at is None or d.approach_watch.best_at >= steps * DT + s.backoff_time - 1e-9
 
 
+def test_a_pair_askew_in_the_mouth_is_not_nudged_and_backs_off_when_it_jams():
+    s = dk.DockingSettings(insert_stall_time=1.0, jam_yaw=0.25)
+    steps = int(round(s.insert_stall_time / DT))
+    askew = dk.Docking(s, mover="j", now=0.0)             # 11 mm out, 0.45 rad: no nudge (no brace either)
+    assert not any(askew.insert_stalled(0.011 + 0.001 * (k % 2), k * DT, dtheta=-0.45) for k in range(3 * steps))
+    straight = dk.Docking(s, mover="j", now=0.0)          # lined up within jam_yaw: nudged as before
+    assert any(straight.insert_stalled(0.011 + 0.001 * (k % 2), k * DT, dtheta=0.1) for k in range(steps + 2))
+    for mover, sign in (("j", 1.0), ("i", -1.0)):
+        d = dk.Docking(s, mover=mover, now=0.0)
+        d.jammed(0.010, -0.002, 4.0, dtheta=-0.45)
+        assert d.phase == dk.BACKOFF and "askew" in d.note and d.attempts == 1
+        cmd = d.command(mover_heading=0.45, partner_heading=0.0)
+        assert sign * cmd.v < 0 and cmd.w < 0              # away from the partner, turning to its heading
+        for k in range(int(s.backoff_time / DT) + 1):
+            d.update(0.02, 0.0, -0.3, 4.0 + k * DT)
+        assert d.phase == dk.APPROACH
+    lined_up = dk.Docking(s, mover="i", now=0.0)          # a jam within jam_yaw: the aim alone, as before
+    lined_up.jammed(0.002, 0.003, 4.0, dtheta=0.05)
+    assert lined_up.phase == dk.APPROACH and lined_up.aim < 0
+    off = dk.Docking(dk.DockingSettings(jam_yaw=0.0), mover="j", now=0.0)   # 0: off
+    off.jammed(0.010, -0.002, 4.0, dtheta=-0.45)
+    assert off.phase == dk.APPROACH
+
+
 def test_a_stalled_insertion_is_nudged_straight_in_then_the_mpc_inserts_again():
     off = dk.Docking(dk.DockingSettings(insert_stall_time=0.0), mover="j", now=0.0)     # 0: off
     assert not any(off.insert_stalled(0.011, k * DT) for k in range(100))

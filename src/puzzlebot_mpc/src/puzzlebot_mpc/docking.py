@@ -124,6 +124,11 @@ class DockingSettings:
     backoff_time: float = 0.8         # s
     aim_step: float = 0.002           # m: after a jammed push, aim the mouth this much further to the side
     aim_max: float = 0.004            # m: ... up to this far off the partner's axis
+    jam_yaw: float = 0.25             # rad: (insert_by_mpc) a pair whose headings are more than this apart while
+    #                                   the head is in the mouth is not nudged, and when it jams the mover
+    #                                   backs off (backoff_*), turning to its partner's heading, before it
+    #                                   approaches again (0: off; the head askew in the mouth holds the pair's
+    #                                   relative heading, measured in docs/mpc.md "Seating")
     stall_time: float = 0.0           # s: an approach (head not yet in the mouth) that has not come
     #                                   stall_progress closer in this long has stalled: back off, then again
     #                                   (0: off; measured with 8 s, line8 seed 11: 1 of 8 either way)
@@ -150,7 +155,7 @@ class DockingSettings:
         for name in self.__dataclass_fields__:
             if name in ("pull_test", "insert_by_mpc"):
                 continue
-            zero_ok = name in ("repush_gap", "stall_time", "insert_stall_time", "brace_speed")
+            zero_ok = name in ("repush_gap", "stall_time", "jam_yaw", "insert_stall_time", "brace_speed")
             value, least = getattr(self, name), 0.0 if zero_ok else 1e-12
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= least):
                 raise ConfigError("%s.dock_%s: must be a number > 0, got %r" % (where, name, value))
@@ -252,14 +257,21 @@ class Docking:
         s = self.s
         self.aim = max(-s.aim_max, min(s.aim_max, self.aim - math.copysign(s.aim_step, lateral)))
 
-    def jammed(self, gap, lateral, now):
+    def askew(self, dtheta):
+        """True when the pair's relative heading [rad] is beyond ``jam_yaw`` (0: never)."""
+        return 0 < self.s.jam_yaw < abs(dtheta)
+
+    def jammed(self, gap, lateral, now, dtheta=0.0):
         """The MPC's own insertion (``insert_by_mpc``) pushed for its timeout without getting home: aim the
-        next approach to the side the mover was pushed (see the module docstring)."""
+        next approach to the side the mover was pushed (see the module docstring); a pair askew
+        (:meth:`askew`) also backs off first."""
         self.attempts += 1
         self._aim_away(lateral)
         self.approach_watch.reset()
-        self.note = "insertion %d jammed (%.1f mm out, %.1f mm aside); aiming %.1f mm across" % (
-            self.attempts, 1e3 * gap, 1e3 * lateral, 1e3 * self.aim)
+        self.note = "insertion %d jammed (%.1f mm out, %.1f mm aside, %.2f rad); aiming %.1f mm across" % (
+            self.attempts, 1e3 * gap, 1e3 * lateral, dtheta, 1e3 * self.aim)
+        if self.askew(dtheta):
+            self._to(BACKOFF, now, self.note + "; askew: backing off")
 
     def approach_stalled(self, gap, lateral, dtheta, now):
         """During the approach (the head not yet in the mouth): True when the pair has come no closer than
@@ -277,7 +289,7 @@ class Docking:
         self._to(BACKOFF, now, "approach %d stalled %.0f mm away for %.0f s" % (self.stalls, 1e3 * d, waited))
         return True
 
-    def insert_stalled(self, gap, now):
+    def insert_stalled(self, gap, now, dtheta=0.0):
         """While the MPC inserts (the head in the mouth, ``insert_by_mpc``): True, and the ``nudge`` phase
         begins, when the gap between the faces [m], more than ``home_gap``, has not closed by
         ``insert_stall_progress`` in ``insert_stall_time``; only for a mover driving forwards ("j": a robot
@@ -285,7 +297,7 @@ class Docking:
         (line8): the head in the mouth holds the relative heading, the MPC turns against it at a crawl;
         the straight push at ``push_speed`` takes the barbs through the lips."""
         s = self.s
-        if s.insert_stall_time <= 0 or self.mover != "j":
+        if s.insert_stall_time <= 0 or self.mover != "j" or self.askew(dtheta):
             return False
         if gap <= s.home_gap:              # home already (not yet lined up): nothing to push
             self.insert_reset()

@@ -606,11 +606,11 @@ class PairBook:
                 if status != HEAD_ALIGNED:       # (a jam included: it leaves the pair decoupled)
                     dock.insert_reset()
                 if jammed:                       # pushed in for align_timeout without getting home
-                    dock.jammed(gap, lateral, now)
+                    dock.jammed(gap, lateral, now, dtheta)
                 elif status == DECOUPLED:        # a stalled approach backs off and approaches again
                     dock.approach_stalled(gap, lateral, dtheta, now)
                 elif status == HEAD_ALIGNED and dock.phase == APPROACH:   # a stalled insertion: a nudge
-                    dock.insert_stalled(gap, now)
+                    dock.insert_stalled(gap, now, dtheta)
                 elif status == HEAD_INSERTED and self.dock_settings.pull_test:
                     dock.start_pull(gap, now)
                     status = HEAD_ALIGNED

@@ -140,6 +140,7 @@ class MPCSettings:
     dock_backoff_speed: float = _DOCK.backoff_speed # m/s
     dock_aim_step: float = _DOCK.aim_step         # m: after a jammed push, aim the mouth this much to the side ...
     dock_aim_max: float = _DOCK.aim_max           # m: ... up to this far off the partner's axis
+    dock_jam_yaw: float = _DOCK.jam_yaw           # rad: the head askew in the mouth by more: no nudge; a jam backs off
     dock_backoff_time: float = _DOCK.backoff_time # s
     dock_stall_time: float = _DOCK.stall_time     # s: an approach no closer in this long: back off, again (0: off)
     dock_stall_progress: float = _DOCK.stall_progress  # m: ... by this much
