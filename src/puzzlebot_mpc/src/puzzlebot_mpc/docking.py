@@ -7,10 +7,13 @@ by two settings:
 - ``insert_by_mpc`` (default): the MPC pushes the anchor home itself
   (Algorithm 2's head_aligned -> head_inserted, with its lining-up test,
   ``insert_*`` in MPCSettings). A push that stays head_aligned for
-  ``insert_timeout`` has jammed: the barb sits on the lip. The pair backs
-  off and :meth:`Docking.jammed` aims the next approach ``aim_step`` to the
-  side the mover was pushed (the anchor turns freely in its holder, so the
-  head is not where the partner's pose puts it), up to ``aim_max``.
+  ``insert_timeout`` has jammed: the barb sits on the lip. The pair is
+  decoupled again and :meth:`Docking.jammed` aims the next approach
+  ``aim_step`` to the side the mover was pushed (the anchor turns freely in
+  its holder, so the head is not where the partner's pose puts it), up to
+  ``aim_max``. A pair whose headings are more than ``jam_yaw`` apart is
+  *askew*: the head in the mouth holds the relative heading, so such a pair
+  gets no nudge, and when it jams the mover backs off first.
 - ``insert_by_mpc`` false: this module drives the mover straight in (the
   ``push`` phase below) and backs it off after ``push_timeout``.
 
@@ -36,13 +39,14 @@ nudge      (``insert_by_mpc``, with ``insert_stall_time``) the MPC's
            not yet home: a mover driving forwards drives straight in at
            ``push_speed`` for ``nudge_time`` (or until home), then the
            MPC again; Algorithm 2's lining-up test still decides when the
-           pair is coupled. Meanwhile the anchor robot *braces*: it (and
-           its assembly, as one body) drives backwards into the mover at
-           ``brace_speed`` until the faces are ``brace_gap`` apart. A
-           robot pushed at its tail rests nose up on its rear caster, its
-           anchor's head below the mouth of a robot that drives forwards
-           (nose up too); the brace's wheel torque tips it onto its front
-           caster and lifts the head (:meth:`Docking.brace`)
+           pair is coupled. Not for a pair askew (``jam_yaw``). Meanwhile
+           the anchor robot *braces*: it (and its assembly, as one body)
+           drives backwards into the mover at ``brace_speed`` until the
+           faces are ``brace_gap`` apart. A robot pushed at its tail
+           rests nose up on its rear caster, its anchor's head below the
+           mouth of a robot that drives forwards (nose up too); the
+           brace's wheel torque tips it onto its front caster and lifts
+           the head (:meth:`Docking.brace`)
 push       drives straight into the partner at ``push_speed``, holding
            the heading the partner had when the push began (the mouth and
            the anchor's free yaw do the last millimetres; chasing a partner
@@ -58,7 +62,8 @@ repush     drives home again at ``repush_speed`` (the pull leaves the anchor
            a hard one can knock a barb out again)
 backoff    backs away at ``backoff_speed`` for ``backoff_time``, then
            approaches again: after a push that did not get home
-           (``push_timeout``) or a pull outside the band. A push that jams
+           (``push_timeout``), a pull outside the band, or a jam askew
+           (``jam_yaw``: turning to the partner's heading). A push that jams
            leaves the mover pushed aside by the head, towards the side the
            head sits on (the anchor turns freely in its holder, so the head
            is not where the partner's pose puts it): the next approach aims
