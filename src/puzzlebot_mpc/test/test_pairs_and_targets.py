@@ -337,3 +337,17 @@ def test_a_stalled_insertion_is_nudged_and_algorithm_2_still_decides_the_couplin
         t += 0.1
         newly += book.update(poses, t)[0]
     assert newly == [pair] and pair.key in book.coupled
+
+
+def test_a_knob_pair_is_coupled_only_with_the_knob_in_the_hole_for_the_confirm_steps():
+    seating = pr.Seating(confirm_steps=2, knob=0.001)
+    pair = pr.make_pair("k", "h", pr.KNOB, GEO)
+    h = (0.0, 0.0, 0.0)
+    off = (0.003, -GEO.body_side, 0.0)              # 3 mm along the side from the hole: pressed, not in
+    assert pr.update_status(pair, off, h, GEO, 0.0015, seating) == pr.DECOUPLED
+    home = (0.0005, -GEO.body_side - 0.0003, 0.0)
+    assert pr.update_status(pair, home, h, GEO, 0.0015, seating) == pr.DECOUPLED      # first reading
+    assert pr.update_status(pair, home, h, GEO, 0.0015, seating) == pr.HEAD_INSERTED
+    # without the tolerance (Seating's default) the knob region decides at once, 3 mm off included
+    loose = pr.make_pair("k", "h", pr.KNOB, GEO)
+    assert pr.update_status(loose, off, h, GEO, 0.0015) == pr.HEAD_INSERTED

@@ -63,8 +63,10 @@ def test_moving_joints_are_joints_of_the_description():
     _, _, joints = parse(robot_description(ROBOTS, ROBOT, ANCHOR))
     for r in ROBOTS:
         names = moving_joints(r.name, r.pilot)
-        assert len(names) == (4 if r.pilot else 2) + 3
-        assert all(joints[n][0] in ("continuous", "revolute") for n in names)
+        assert len(names) == (4 if r.pilot else 2) + 1 + 3           # wheels, the sprung knob, the anchor
+        assert all(joints[n][0] in ("continuous", "revolute", "prismatic") for n in names)
+        assert joints["%s/knob_joint" % r.name][0] == "prismatic"
+        assert "%s/knob_joint" % r.name not in moving_joints(r.name, r.pilot, knob=False)
 
 
 @pytest.mark.parametrize("kwargs, fragment", [({"anchor": "tf", "anchor_params": None}, "anchor's parameters"),

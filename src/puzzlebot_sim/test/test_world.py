@@ -337,3 +337,34 @@ def test_at_rest_a_partners_anchor_head_meets_the_mouth_low_by_the_bodies_pitch_
     low = {c: p.opening_z - head_height_at_a_mouth(replace(p, caster_clearance=c)) for c in (0.0005, 0.0003)}
     assert low[0.0005] - low[0.0003] == pytest.approx(0.0002 / p.caster_x * centres_apart(p), abs=0.0001)
     assert low[p.caster_clearance] > room                 # the shipped model: 2.5 mm low, on the mouth's floor
+
+
+def _slide_alongside(p):
+    """pz2 (knob on its left) drives along pz1's right side on a line closing in 0.06 rad, from 30 mm
+    behind and 3 mm out: the knob meets pz1's corner at a glancing angle. Returns pz2's knob pair with pz1
+    (None: no knob at the hole) and the knob's depression [m] once pz2 has stopped."""
+    starts = [RobotStart("pz1", 0, 0, 0), RobotStart("pz2", -0.03, -p.body_side - 0.003, 0.06)]
+    with SimWorld(p, starts) as w:
+        w.run(0.3)
+        w.set_command("pz2", 0.02, 0.0)
+        for _ in range(40):
+            w.run(0.1)
+            if [q for q in w.physical_knob_pairs() if q.status == HEAD_INSERTED]:
+                break
+        w.set_command("pz2", 0.0, 0.0)
+        w.run(0.5)
+        pairs = [q for q in w.physical_knob_pairs() if (q.anchor_robot, q.opening_robot) == ("pz2", "pz1")]
+        return (pairs[0] if pairs else None), w.knob_depression("pz2")
+
+
+def test_a_sprung_knob_slides_along_the_side_into_the_hole():
+    # the knob (knob_travel > 0) is pressed in by pz1's corner and side, then springs into the hole
+    pair, pressed = _slide_alongside(RobotParams())
+    assert pair is not None and pair.status == HEAD_INSERTED, pair
+    assert pressed < 0.001
+
+
+def test_a_rigid_knob_on_the_same_path_does_not_get_in():
+    # the same path with a rigid knob: it cannot pass pz1's corner, so the pair does not seat
+    pair, _ = _slide_alongside(RobotParams(knob_travel=0.0))
+    assert pair is None or pair.status != HEAD_INSERTED, pair

@@ -79,6 +79,8 @@ class Seating:
     yaw: float = math.inf            # rad: |heading error| of the pair
     confirm_steps: int = 1           # consecutive updates the head_inserted condition must hold
     align_timeout: float = math.inf  # s: head_aligned longer than this without insertion -> decoupled
+    knob: float = math.inf           # m: a knob pair is coupled only with the knob point this close to the
+                                     # hole point, along the side and across it (inf: the knob region)
 
 
 @dataclass
@@ -217,9 +219,14 @@ def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=No
     """
     footprint = geometry.footprint()
     if pair.type == KNOB:
-        inside = head_margin(pair, pose_i, pose_j, geometry.knob_region()) >= -eps
+        if math.isinf(seating.knob):
+            inside = head_margin(pair, pose_i, pose_j, geometry.knob_region()) >= -eps
+        else:
+            off = point_in_robot(pose_j, world_point(pose_i, pair.point_i)) - pair.point_j[:2]
+            inside = max(abs(off[0]), abs(off[1])) <= seating.knob
         aligned = abs(alignment_error(pair, pose_i, pose_j)[1]) <= geometry.knob_yaw_tolerance
-        return HEAD_INSERTED if inside and aligned else DECOUPLED
+        pair.confirmed = pair.confirmed + 1 if inside and aligned else 0
+        return HEAD_INSERTED if pair.confirmed >= seating.confirm_steps else DECOUPLED
     status = pair.status
     if status == DECOUPLED:
         pair.confirmed = 0

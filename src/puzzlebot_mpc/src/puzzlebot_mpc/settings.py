@@ -75,6 +75,9 @@ class MPCSettings:
     approach_standoff_max: float = 0.03   # m: largest standoff of a misaligned anchor pair's approach target
     approach_gain_angle: float = 0.04     # m/rad: standoff per radian of heading error
     approach_gain_lateral: float = 2.0    # m/m: standoff per metre of lateral offset of the head
+    knob_seat_tolerance: float = 0.001   # m: a knob pair is coupled when the knob point is this close to the
+                                     # hole point (along the side and across it; the hole's play is
+                                     # 0.5 mm) for insert_confirm_steps steps
     pair_epsilon: float = 0.0015     # m: margin of the pair status tests (Algorithm 2)
     pair_lost_margin: float = 0.005  # m: a coupled pair whose head is this far outside its polygon is lost
     insert_lateral_tolerance: float = 0.0007  # m: an anchor pair pushed home is coupled only when C_a is this
@@ -166,7 +169,7 @@ class MPCSettings:
         from puzzlebot_mpc.pairs import Seating
 
         return Seating(self.insert_lateral_tolerance, self.insert_yaw_tolerance, self.insert_confirm_steps,
-                       self.insert_timeout)
+                       self.insert_timeout, self.knob_seat_tolerance)
 
     @classmethod
     def from_dict(cls, data, where="mpc"):
@@ -193,7 +196,7 @@ class MPCSettings:
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral",
-                    "seed_holder_clearance", "stage_standoff"):
+                    "seed_holder_clearance", "stage_standoff", "knob_seat_tolerance"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
         if self.constraint_horizon > self.horizon:

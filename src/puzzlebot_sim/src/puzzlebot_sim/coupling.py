@@ -111,14 +111,16 @@ def unseated_reason(head_tip, barb_tips, rp, tolerance=0.0005, tip_radius=0.0):
     return "; ".join(out)
 
 
-def classify_knob(knob_centre, rp, tolerance=0.001):
+def classify_knob(knob_centre, rp, tolerance=0.001, depression=0.0):
     """Status of a knob whose centre (x, y, z) [m] is given in the hole robot's base_link.
 
     The hole is a pocket in the right side (y = -body_side/2) at height
     ``knob_z``; a knob of the neighbour on that side has its centre on the
     neighbour's left face, so with the two sides touching it lies on this
     robot's right face. ``tolerance`` [m] absorbs the gap between the sides
-    and contact penetration.
+    and contact penetration. ``depression`` [m]: how far a sprung knob is
+    pressed into its side (World.knob_depression): a knob pressed by more
+    than ``tolerance`` sits on the hole's edge, not in it.
     """
     x, y, z = knob_centre
     gap = -rp.body_side / 2.0 - y                     # > 0: the knob robot's side is this far away
@@ -126,10 +128,10 @@ def classify_knob(knob_centre, rp, tolerance=0.001):
     if not -rp.hole_depth <= gap < rp.knob_radius or abs(x) >= rp.hole_width / 2.0 + rp.knob_radius \
             or dz >= (rp.hole_height + rp.knob_height) / 2.0:
         return DECOUPLED
-    return HEAD_INSERTED if not _knob_faults(knob_centre, rp, tolerance) else HEAD_ALIGNED
+    return HEAD_INSERTED if not _knob_faults(knob_centre, rp, tolerance, depression) else HEAD_ALIGNED
 
 
-def _knob_faults(knob_centre, rp, tolerance):
+def _knob_faults(knob_centre, rp, tolerance, depression=0.0):
     """What keeps a knob that is at a hole (classify_knob not DECOUPLED) from being seated: a list of short
     texts, empty when it is seated. Points as for :func:`classify_knob`."""
     x, y, z = knob_centre
@@ -142,12 +144,14 @@ def _knob_faults(knob_centre, rp, tolerance):
         out.append("the knob %.1f mm from the hole's centre along the side (play %.1f mm)" % (1e3 * abs(x), 1e3 * play))
     if abs(z - rp.knob_z) > (rp.hole_height - rp.knob_height) / 2.0 + tolerance:
         out.append("the knob %.1f mm off the hole's height" % (1e3 * abs(z - rp.knob_z)))
+    if depression > tolerance:
+        out.append("the knob pressed %.1f mm into its side" % (1e3 * depression))
     return out
 
 
-def knob_reason(knob_centre, rp, tolerance=0.001):
+def knob_reason(knob_centre, rp, tolerance=0.001, depression=0.0):
     """Why a knob at a hole is not seated (classify_knob's HEAD_ALIGNED): "the knob partly in the hole"
     and what is off, joined by "; " ("" when seated or not at the hole). Points as for :func:`classify_knob`."""
-    if classify_knob(knob_centre, rp, tolerance) != HEAD_ALIGNED:
+    if classify_knob(knob_centre, rp, tolerance, depression) != HEAD_ALIGNED:
         return ""
-    return "%s: %s" % (KNOB_PARTLY, "; ".join(_knob_faults(knob_centre, rp, tolerance)))
+    return "%s: %s" % (KNOB_PARTLY, "; ".join(_knob_faults(knob_centre, rp, tolerance, depression)))

@@ -22,7 +22,7 @@ The tree::
   ``anchor="nominal"`` (the lab, where nothing measures the anchor) fixes it at
   its rest pose in the holder (``world.anchor_home_x``, on the opening's
   height), so robot_state_publisher puts it on /tf_static; ``None``: no anchors.
-- wheels (continuous) and the anchor's neck and barbs (revolute) move with
+- wheels (continuous), the sprung knob (prismatic) and the anchor's neck and barbs (revolute) move with
   /joint_states (the sim node publishes them, names as here); fixed joints
   (casters) go to /tf_static through robot_state_publisher.
 """
@@ -109,13 +109,15 @@ def robot_description(robots, robot_params, anchor_params=None, anchor="tf", nam
 
 
 
-def moving_joints(robot, pilot, anchor=True):
+def moving_joints(robot, pilot, anchor=True, knob=True):
     """Names of the description's joints of ``robot`` that /joint_states moves: its wheels (pilots:
-    four) and, with anchors, the anchor's neck and barbs (in urdf.WHEEL_JOINTS / PILOT_WHEEL_JOINTS /
-    ANCHOR_JOINTS order)."""
-    from puzzlebot_sim.urdf import ANCHOR_JOINTS, PILOT_WHEEL_JOINTS, WHEEL_JOINTS
+    four), the sprung knob's joint (``knob``: RobotParams.knob_travel > 0) and, with anchors, the
+    anchor's neck and barbs (in urdf.WHEEL_JOINTS / PILOT_WHEEL_JOINTS, KNOB_JOINT, ANCHOR_JOINTS order)."""
+    from puzzlebot_sim.urdf import ANCHOR_JOINTS, KNOB_JOINT, PILOT_WHEEL_JOINTS, WHEEL_JOINTS
 
     names = [prefixed(j, robot) for j in (PILOT_WHEEL_JOINTS if pilot else WHEEL_JOINTS)]
+    if knob:
+        names.append(prefixed(KNOB_JOINT, robot))
     if anchor:
         names += [prefixed("anchor_" + j, robot) for j in ANCHOR_JOINTS]
     return names

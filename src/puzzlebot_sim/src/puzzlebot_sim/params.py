@@ -109,6 +109,12 @@ class RobotParams:
     hole_width: float = 0.010        # m (x)
     hole_depth: float = 0.005        # m (y), into the right side
     hole_height: float = 0.012       # m (z), centred at knob_z
+    # the knob gives way: the lab prints the body in TPU (NinjaFlex), whose side flexes when a
+    # neighbour's side presses the knob; modelled as a plunger on a prismatic joint along +y that a
+    # spring pushes out. Not measured yet (docs/lab-measurements.md, item 10)
+    knob_travel: float = 0.0045      # m, how far a pressed knob goes into its side (0: a rigid knob)
+    knob_spring_force: float = 0.1   # N, the spring's force pushing the knob out (the drive pushes 0.5 N)
+    knob_mass: float = 0.002         # kg, the knob plunger
 
     @classmethod
     def from_dict(cls, data, where="robot"):
@@ -117,7 +123,7 @@ class RobotParams:
     def check(self, where="robot"):
         names = [f.name for f in fields(self)]
         nonneg = ["ground_clearance", "body_friction", "wheel_friction", "caster_x", "caster_clearance",
-                  "pilot_wheel_x", "wheel_no_load_speed", "bottom_chamfer", "top_chamfer"]
+                  "pilot_wheel_x", "wheel_no_load_speed", "bottom_chamfer", "top_chamfer", "knob_travel"]
         require_positive(self, [n for n in names if n not in nonneg and n != "opening_z"], where)
         _require_nonnegative(self, nonneg, where)
         h, half_h = self.body_side / 2.0, self.body_height / 2.0
@@ -150,6 +156,9 @@ class RobotParams:
                               % (where, self.wheel_no_load_speed, self.wheel_max_speed))
         if self.wheel_radius < self.ground_clearance:
             raise ConfigError("%s: wheel_radius must exceed ground_clearance" % where)
+        if self.knob_travel > self.knob_radius + 1e-9:
+            raise ConfigError("%s.knob_travel (%g m): a knob cannot go further into its side than its radius "
+                              "(%g m)" % (where, self.knob_travel, self.knob_radius))
         if self.knob_radius * 2 > self.hole_width or self.knob_radius > self.hole_depth + 1e-9 \
                 or self.knob_height > self.hole_height:
             raise ConfigError("%s: the knob (r=%g, h=%g) must fit the hole (%g x %g x %g)"

@@ -6,7 +6,10 @@ block with voids carved out of it -- the front opening (mouth between two
 lips, the slits behind them), the anchor holder's pocket and slot in the back
 face, the hole on the right side, the corners of chamfered edges -- and
 decomposed into boxes; a chamfer's face is a tilted box. The battery box
-(behind the slits) and the knob on the left side are their own shapes. Two
+(behind the slits) and the knob on the left side are their own shapes; the
+knob is its own link, ``knob``, on a prismatic joint along +y (``knob_joint``:
+0 out, down to ``-knob_travel`` pressed into the side; the world's spring
+pushes it out), or part of ``base_link`` when ``knob_travel`` is 0. Two
 driven wheels (pilot robots: four) on continuous joints, two ball casters
 (non-pilots; frictionless, set by the world) on fixed joints. A wheel's
 collision shape is a sphere of the wheel radius (the world lets wheels and
@@ -36,6 +39,8 @@ URDF_FLAGS = pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE
 
 
 WHEEL_JOINTS = ("left_wheel_joint", "right_wheel_joint")
+KNOB_JOINT = "knob_joint"          # prismatic, along +y: 0 = the knob out, -knob_travel = pressed flat
+KNOB_INERTIA_RADIUS = 0.005        # m: the plunger's inertia as a 5 mm radius of gyration (a gram link)
 PILOT_WHEEL_JOINTS = ("front_left_wheel_joint", "rear_left_wheel_joint",
                       "front_right_wheel_joint", "rear_right_wheel_joint")
 CASTER_LINKS = ("front_caster", "rear_caster")
@@ -249,13 +254,20 @@ def robot_urdf(p, name="puzzlebot", pilot=False):
     for x, y, r in lip_edges(p):
         body += _shape('<cylinder radius="%.6g" length="%.6g"/>' % (r, p.mouth_height), (x, y, p.opening_z),
                        color="lip")
-    body += _shape('<cylinder radius="%.6g" length="%.6g"/>' % (p.knob_radius, p.knob_height),
-                   (0.0, p.body_side / 2, p.knob_z), color="knob")
-    n_wheels = 4 if pilot else 2
-    m_body = p.body_mass - n_wheels * p.wheel_mass
-    links = ['<link name="base_link">%s%s</link>' % (
-        _inertial(m_body, _box_inertia(m_body, p.body_side, p.body_side, p.body_height)), body)]
-    joints = []
+    knob = '<cylinder radius="%.6g" length="%.6g"/>' % (p.knob_radius, p.knob_height)
+    links, joints = [], []
+    m_body = p.body_mass - (4 if pilot else 2) * p.wheel_mass
+    if p.knob_travel > 0.0:             # the sprung knob: a plunger on a prismatic joint along +y
+        m_body -= p.knob_mass
+        i_k = p.knob_mass * max(p.knob_radius, KNOB_INERTIA_RADIUS) ** 2
+        links.append('<link name="knob">%s%s</link>' % (_inertial(p.knob_mass, (i_k, i_k, i_k)),
+                                                          _shape(knob, color="knob")))
+        joints.append(_joint(KNOB_JOINT, "prismatic", "base_link", "knob", (0.0, p.body_side / 2, p.knob_z),
+                             axis="0 1 0", limit=(-p.knob_travel, 0.0)))
+    else:
+        body += _shape(knob, (0.0, p.body_side / 2, p.knob_z), color="knob")
+    links.insert(0, '<link name="base_link">%s%s</link>' % (
+        _inertial(m_body, _box_inertia(m_body, p.body_side, p.body_side, p.body_height)), body))
     wheel_rpy = (-math.pi / 2, 0.0, 0.0)
     # about the axle: the wheel's own inertia plus the gear motor's reflected rotor inertia; the same
     # about the other axes (Bullet rejects tensors that break the triangle inequality)

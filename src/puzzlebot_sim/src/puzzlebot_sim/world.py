@@ -38,7 +38,7 @@ from puzzlebot_sim.bullet_session import BulletSession
 from puzzlebot_sim.mocap import MocapModel
 from puzzlebot_sim.params import AnchorParams, AnchorRestParams, SimParams, WorldParams
 from puzzlebot_sim.roll_stop import AnchorRollStop
-from puzzlebot_sim.urdf import (CASTER_LINKS, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
+from puzzlebot_sim.urdf import (CASTER_LINKS, KNOB_JOINT, PILOT_WHEEL_JOINTS, URDF_FLAGS, WHEEL_JOINTS, anchor_urdf,
                                 robot_urdf)
 from puzzlebot_sim.worlds import WORLDS
 
@@ -87,6 +87,7 @@ class SimRobot:
     wheel_targets: Optional[Tuple[float, float]] = None   # wheel speed setting (left, right) [rad/s]
     anchor_q: Optional[Tuple[float, float, float]] = None  # anchor joint angles at its last motor setting [rad]
     anchor_state: Optional[list] = None          # anchor joint states read this step (pb.getJointStates)
+    knob: Optional[int] = None                   # the sprung knob's joint (None: the knob is rigid)
 
 
 # ------------------------------------------------------------- start checks
@@ -302,6 +303,12 @@ class SimWorld(BulletSession):
                                   rollingFriction=0.0, physicsClientId=c)
                 self._set_group(body, links[name], GROUP_WHEEL)
         robot = SimRobot(s.name, body, wheels, n_left, s.pilot)
+        if KNOB_JOINT in joints:             # the sprung knob: a position motor whose force is the spring's
+            robot.knob = joints[KNOB_JOINT]
+            pb.changeDynamics(body, robot.knob, lateralFriction=p.body_friction, physicsClientId=c)
+            self._set_group(body, robot.knob, GROUP_BODY)
+            pb.setJointMotorControl2(body, robot.knob, pb.POSITION_CONTROL, targetPosition=0.0,
+                                     force=p.knob_spring_force, physicsClientId=c)
         if self.anchor_params is not None:
             robot.anchor = self._spawn_anchor(s, z0)
         robot.plant = self._make_plant(s.name)
@@ -609,6 +616,13 @@ class SimWorld(BulletSession):
         local = self.anchor_in_robot(name)
         return None if local is None else self._anchor_home_x - local[0][0]
 
+    def knob_depression(self, name):
+        """How far [m] ``name``'s knob is pressed into its side (0: out, or a rigid knob)."""
+        robot = self.robots[name]
+        if robot.knob is None:
+            return 0.0
+        return max(0.0, -pb.getJointState(robot.body, robot.knob, physicsClientId=self.client)[0])
+
     def physical_knob_pairs(self):
         """Knob-hole pairs read off the robots' poses (puzzlebot_sim.coupling.classify_knob).
 
@@ -626,10 +640,11 @@ class SimWorld(BulletSession):
                 if h_name == k_name:
                     continue
                 local = pb.multiplyTransforms(*inverse[h_name], knob, [0, 0, 0, 1], physicsClientId=c)[0]
-                status = coupling.classify_knob(local, p)
-                if status != coupling.DECOUPLED:
-                    out.append(coupling.PhysicalPair(k_name, h_name, status, knob=True,
-                                                     reason=coupling.knob_reason(local, p)))
+                if coupling.classify_knob(local, p) == coupling.DECOUPLED:
+                    continue
+                pressed = self.knob_depression(k_name)
+                out.append(coupling.PhysicalPair(k_name, h_name, coupling.classify_knob(local, p, depression=pressed),
+                                                 knob=True, reason=coupling.knob_reason(local, p, depression=pressed)))
         return sorted(out, key=lambda q: (q.anchor_robot, q.opening_robot))
 
     def measure(self, name):
