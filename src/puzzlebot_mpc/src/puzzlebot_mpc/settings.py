@@ -75,6 +75,19 @@ class MPCSettings:
     approach_standoff_max: float = 0.03   # m: largest standoff of a misaligned anchor pair's approach target
     approach_gain_angle: float = 0.04     # m/rad: standoff per radian of heading error
     approach_gain_lateral: float = 2.0    # m/m: standoff per metre of lateral offset of the head
+    knob_standoff: float = 0.02      # m: a knob pair's mover comes along its partner's side on a lane
+                                     # knob_lane_gap out from it, then on a straight line over the last
+                                     # knob_standoff to knob_press inside the side at the hole
+                                     # (puzzlebot_mpc.knob_approach)
+    knob_lane_gap: float = 0.0015    # m
+    knob_press: float = 0.0005       # m
+    knob_level: float = 0.005        # m: ... reached this far behind the hole, then straight on into it
+    knob_standoff_max: float = 0.15  # m: longest run a knob pair's mover off its lane backs off for
+    knob_speed: float = 0.02         # m/s: largest speed of a knob pair's mover along the lane ...
+    knob_speed_gain: float = 0.5     # 1/s: ... slowing to the hole at this speed per metre left
+    knob_steer_gain: float = 80.0    # 1/m: ... following the lane with this gain (about 2/gain of travel to
+                                     # get onto it)
+    knob_turn_rate: float = 0.4      # rad/s: ... turning at most this fast
     knob_seat_tolerance: float = 0.001   # m: a knob pair is coupled when the knob point is this close to the
                                      # hole point (along the side and across it; the hole's play is
                                      # 0.5 mm) for insert_confirm_steps steps
@@ -164,6 +177,17 @@ class MPCSettings:
             return None
         return DockingSettings(**{f.name: getattr(self, "dock_" + f.name) for f in dc_fields(DockingSettings)})
 
+    def knob_lane(self):
+        """The knob pairs' approach lane (puzzlebot_mpc.knob_approach.KnobLane)."""
+        from puzzlebot_mpc.knob_approach import KnobLane
+
+        return KnobLane(standoff=self.knob_standoff, gap=self.knob_lane_gap, press=self.knob_press,
+                        level=self.knob_level,
+                        lookahead=self.approach_lookahead, standoff_max=self.knob_standoff_max,
+                        speed=self.knob_speed,
+                        speed_gain=self.knob_speed_gain, steer_gain=self.knob_steer_gain,
+                        turn_rate=self.knob_turn_rate)
+
     def seating(self):
         """The pair status tests' lining-up conditions (puzzlebot_mpc.pairs.Seating)."""
         from puzzlebot_mpc.pairs import Seating
@@ -181,7 +205,8 @@ class MPCSettings:
         require_positive(self, ["dt", "horizon", "constraint_horizon", "v_max", "w_max", "dv_max",
                                 "dw_max", "max_iter", "goal_tolerance", "assembly_speed", "assembly_turn_rate", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "solver_threads", "active_set_iterations", "pair_epsilon",
-                                "pair_lost_margin",
+                                "pair_lost_margin", "knob_standoff", "knob_speed", "knob_speed_gain",
+                                "knob_steer_gain", "knob_turn_rate",
                                 "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
@@ -196,7 +221,8 @@ class MPCSettings:
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral",
-                    "seed_holder_clearance", "stage_standoff", "knob_seat_tolerance"):
+                    "seed_holder_clearance", "stage_standoff", "knob_standoff_max", "knob_lane_gap",
+                    "knob_press", "knob_level", "knob_seat_tolerance"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
         if self.constraint_horizon > self.horizon:

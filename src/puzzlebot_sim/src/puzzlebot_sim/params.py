@@ -61,6 +61,8 @@ class RobotParams:
     #                                   bottom (0 = square edges; 0 or >= 2 mm, Bullet's margin; not measured)
     top_chamfer: float = 0.0         # m, the same along the top front and back edges: how far two coupled
     #                                   robots fold concave before their tops meet (docs/sim.md; not measured)
+    side_fillet: float = 0.003       # m, radius of the four vertical corner edges (0 = square; 0 or >= 2 mm;
+    #                                   a printed body's edges are rounded; not measured)
     # wheels (pilots: two pairs at x = +/-pilot_wheel_x)
     wheel_radius: float = 0.010      # m
     wheel_width: float = 0.003       # m
@@ -123,7 +125,8 @@ class RobotParams:
     def check(self, where="robot"):
         names = [f.name for f in fields(self)]
         nonneg = ["ground_clearance", "body_friction", "wheel_friction", "caster_x", "caster_clearance",
-                  "pilot_wheel_x", "wheel_no_load_speed", "bottom_chamfer", "top_chamfer", "knob_travel"]
+                  "pilot_wheel_x", "wheel_no_load_speed", "bottom_chamfer", "top_chamfer", "knob_travel",
+                  "side_fillet"]
         require_positive(self, [n for n in names if n not in nonneg and n != "opening_z"], where)
         _require_nonnegative(self, nonneg, where)
         h, half_h = self.body_side / 2.0, self.body_height / 2.0
@@ -174,6 +177,14 @@ class RobotParams:
         room = {"bottom_chamfer": min(half_h + self.opening_z - port, sides),            # below mouth / holder
                 "top_chamfer": min(half_h - self.opening_z - max(self.mouth_height / 2.0 + self.lock_height, port),
                                    sides)}
+        if 0.0 < self.side_fillet < 2 * URDF_MARGIN - 1e-12:
+            raise ConfigError("%s.side_fillet: %.1f mm is below Bullet's 2 mm collision margin (use 0 for square "
+                              "edges)" % (where, 1e3 * self.side_fillet))
+        corner_room = self.body_side / 2.0 - max(self.hole_width / 2.0, self.knob_radius, self.slit_width / 2.0,
+                                                 self.holder_width / 2.0)
+        if self.side_fillet >= corner_room:
+            raise ConfigError("%s.side_fillet: %.1f mm would cut into the side connectors, the slits or the holder "
+                              "(must be below %.1f mm)" % (where, 1e3 * self.side_fillet, 1e3 * corner_room))
         for name, limit in room.items():
             c = getattr(self, name)
             if 0.0 < c < 2 * URDF_MARGIN - 1e-12:

@@ -203,6 +203,10 @@ def body_parts(p):
     for c, z0, z1 in ((p.bottom_chamfer, -hz, -hz + p.bottom_chamfer), (p.top_chamfer, hz - p.top_chamfer, hz)):
         if c > 0.0:                                                                          # chamfered edges
             voids += [((-h, -h, z0), (-h + c, h, z1)), ((h - c, -h, z0), (h, h, z1))]
+    f = p.side_fillet
+    if f > 0.0:                                                                              # rounded corners
+        voids += [((sx * h - (sx > 0) * f, sy * h - (sy > 0) * f, -hz),
+                   (sx * h + (sx < 0) * f, sy * h + (sy < 0) * f, hz)) for sx in (1, -1) for sy in (1, -1)]
     shell = carve(((-h, -h, -hz), (h, h, hz)), voids, 2 * URDF_MARGIN)
     r_e = p.lip_depth / 2.0
     lips = []
@@ -232,6 +236,15 @@ def chamfer_faces(p):
     return faces
 
 
+def corner_edges(p):
+    """Rounded vertical corner edges (``side_fillet``): [(x, y, radius)] of vertical cylinders, base_link; the
+    cylinders span the body's height between its bottom and top chamfers."""
+    f, h = p.side_fillet, p.body_side / 2.0
+    if f <= 0.0:
+        return []
+    return [(sx * (h - f), sy * (h - f), f) for sx in (1, -1) for sy in (1, -1)]
+
+
 def lip_edges(p):
     """Rounded inner lip ends: [(x, y, radius)] of vertical cylinders, base_link."""
     r_e = p.lip_depth / 2.0
@@ -251,6 +264,10 @@ def robot_urdf(p, name="puzzlebot", pilot=False):
     for centre, pitch, size in chamfer_faces(p):
         body += _shape('<box size="%.6g %.6g %.6g"/>' % size, centre, (0.0, pitch, 0.0), color="pilot" if pilot
                        else "body")
+    z0, z1 = -p.body_height / 2.0 + p.bottom_chamfer, p.body_height / 2.0 - p.top_chamfer
+    for x, y, r in corner_edges(p):
+        body += _shape('<cylinder radius="%.6g" length="%.6g"/>' % (r, z1 - z0), (x, y, (z0 + z1) / 2.0),
+                       color="pilot" if pilot else "body")
     for x, y, r in lip_edges(p):
         body += _shape('<cylinder radius="%.6g" length="%.6g"/>' % (r, p.mouth_height), (x, y, p.opening_z),
                        color="lip")

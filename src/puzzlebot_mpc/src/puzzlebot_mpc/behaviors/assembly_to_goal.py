@@ -38,6 +38,7 @@ import math
 
 import numpy as np
 
+from puzzlebot_common.kinematics import pursuit_curvature
 from puzzlebot_mpc.behaviors.base import FAILED, BehaviorError, Progress
 from puzzlebot_mpc.behaviors.go_to_goal import GoToGoal
 from puzzlebot_mpc.docking import seat_measure
@@ -215,11 +216,4 @@ def along_segment(pose, a, b):
         return 0.0, length
     return float(np.dot(np.asarray(pose[:2], float) - a, d)) / length, length
 
-
-def pursuit_curvature(pose, point):
-    """[1/m] (left positive): the arc from ``pose`` (x, y, theta) tangent to its heading through ``point``
-    (x, y), world frame (pure pursuit: 2 sin(bearing) / distance)."""
-    dx, dy = point[0] - pose[0], point[1] - pose[1]
-    bearing = math.atan2(dy, dx) - pose[2]
-    return 2.0 * math.sin(bearing) / max(math.hypot(dx, dy), 1e-6)
 

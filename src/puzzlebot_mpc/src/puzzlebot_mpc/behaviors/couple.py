@@ -20,11 +20,13 @@ distance [m] between its connection points (NaN without poses).
 """
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from puzzlebot_common.geometry import transform_point
 from puzzlebot_mpc import docking as dk
+from puzzlebot_mpc import knob_approach
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
 from puzzlebot_mpc.targets import TargetError, assign, merge_assignments, resolve_target
@@ -101,6 +103,7 @@ class Couple(Behavior):
         a = self.assignment
         self.ctx.pairs.set_goals(a.pairs, a.priority)
         self.ctx.pairs.repair = True
+        self.knob_phase = {}             # knob pair key -> the phase of its mover's last command (knob_approach)
         return "goal pairs: " + ", ".join("%s->%s" % p.key for p in a.pairs)
 
     def status(self, now, poses, newly, lost, elapsed):
@@ -177,6 +180,9 @@ class Couple(Behavior):
                 continue
             mg, hg = (gi, gj) if mover == "i" else (gj, gi)
             m_robot, h_robot = (p.robot_i, p.robot_j) if mover == "i" else (p.robot_j, p.robot_i)
+            if p.type == pr.KNOB:
+                self.knob_objectives(obj, p, mover, m_robot, mg, hg, poses)
+                continue
             dock = book.docking.get(p.key)
             driven = dock is not None and dock.phase in dk.DRIVEN
             seed = len(mg) == len(hg) == 1
@@ -204,6 +210,25 @@ class Couple(Behavior):
                 for m in hg:
                     obj.open_loop[ctx.index[m]] = tuple(float(x) for x in braced[ctx.index[m]])
         self.stage(obj, poses)
+
+    def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses):
+        """A knob pair's mover robot tracks the command of :mod:`puzzlebot_mpc.knob_approach` (along its
+        partner's side), the rest of its assembly the rigid-body speeds that go with it (turning as their
+        couplings allow, at most assembly_turn_rate); the partner's assembly holds still."""
+        ctx, s = self.ctx, self.settings
+        for m in hg:
+            obj.velocity_mask[ctx.index[m]] = self.hold()
+        pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
+        if pi is None or pj is None:
+            return
+        lane = s.knob_lane()
+        if len(mg) > 1:                  # an assembly turns like a train
+            lane = replace(lane, turn_rate=min(lane.turn_rate, s.assembly_turn_rate))
+        cmd = knob_approach.command(pair, mover, pi, pj, lane, self.knob_phase.get(pair.key, knob_approach.FOLLOW))
+        self.knob_phase[pair.key] = cmd.phase
+        self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
+        for m in mg:
+            obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
 
     def staging(self, poses):
         """{robot: (x, y) [m, world]}: where the robots that wait for a busy partner stand ready.
@@ -262,7 +287,8 @@ class Couple(Behavior):
     def driven_pairs(self):
         """Keys of the active pairs the docking manoeuvre drives this step (their alignment cost is off)."""
         book = self.ctx.pairs
-        return {k for k, d in book.docking.items() if d.phase in dk.DRIVEN}
+        knobs = {q.key for q in book.active if q.type == pr.KNOB and self.ctx.mover(q) is not None}
+        return knobs | {k for k, d in book.docking.items() if d.phase in dk.DRIVEN}
 
     def display(self, request_id, state):
         """The target's name and its slots as placed (world frame); the MPC aligns pairs, not slot

@@ -1,0 +1,120 @@
+"""Bringing a knob pair together: the mover follows a lane along its partner's side (not the MPC).
+
+The knob and the hole sit on the wheel axle's line, where a differential
+drive moves only along its heading, so a knob cannot be rolled sideways
+into its hole. A sprung knob (the body's side gives, puzzlebot_sim
+``knob_travel``) gets in by sliding: the mover drives along the partner's
+side on a lane ``gap`` out from it, closes in on a straight line from
+``standoff`` behind the hole to ``press`` inside the side ``level`` behind it,
+and runs on straight into the hole: the knob meets the side's corner at a
+glancing angle and is pressed in (head-on it would push the partner away),
+slides along the side, pressed, and springs into the hole.
+
+The MPC's alignment cost cannot steer an assembly (a chain joining another
+side by side) along such a lane: its coupling polygons let a robot back
+25 mm into its partner's mouth, so the planned motion turns one robot while
+its partners stand. Here the mover's assembly moves as one body with the
+twist :func:`command` gives the mover robot:
+
+- *back off*: a mover more than OFF_LANE off its lane that needs a longer
+  run to get onto it than it has (less than ``need = min(standoff_max,
+  |e| / tan(MAX_CUT) + standoff)`` behind the hole, ``e`` its offset from
+  the lane) backs straight out, without turning (a chain that reverses
+  while it turns jack-knifes), to ``need + lookahead`` behind;
+- *follow*: a line follower on the lane (offset and heading fed back,
+  ``steer_gain``) at up to ``speed``, slowing to the hole at ``speed_gain``
+  per metre left, turning at most ``turn_rate``; from the hole on it creeps
+  (``creep``): the knob's detent holds it there, and the push straightens
+  it against the partner's side, which closes the last millimetre at the
+  knob. A mover more than OVERRUN past the hole (the knob not in it) backs.
+
+Algorithm 2's knob test (``knob_seat_tolerance`` for ``insert_confirm_steps``
+steps, puzzlebot_mpc.pairs) then finds the pair coupled.
+"""
+
+import math
+from dataclasses import dataclass
+
+from puzzlebot_common.geometry import inverse_transform_point
+from puzzlebot_mpc import pairs as pr
+
+BACKOFF, FOLLOW = "backoff", "follow"
+MAX_CUT = 0.35          # rad: the steepest angle at which a mover cuts towards its lane
+OFF_LANE = 0.003        # m: a mover this far off its lane is off it (and may back off to get onto it)
+OVERRUN = 0.002         # m: a mover creeps on until its point is this far past the hole (its knob out of it)
+
+
+@dataclass(frozen=True)
+class KnobLane:
+    """The lane a knob pair's mover follows, in the holding robot's frame (lengths [m])."""
+
+    standoff: float = 0.02         # the lane closes in from this far behind the hole ...
+    gap: float = 0.0015            # ... and this far out from the side ...
+    press: float = 0.0005          # ... to this far inside the side ...
+    level: float = 0.005           # ... this far behind the hole, and runs straight on into it
+    lookahead: float = 0.04        # a mover that backs off goes this far beyond its run
+    standoff_max: float = 0.15     # longest run a mover off its lane backs off for
+    speed: float = 0.02            # m/s: largest speed along the lane
+    speed_gain: float = 0.5        # 1/s: speed per metre left to the hole ...
+    creep: float = 0.003           # m/s: ... but at least this until the hole
+    steer_gain: float = 80.0       # 1/m: the line follower's gain (about 2/gain of travel onto the lane)
+    turn_rate: float = 0.4         # rad/s: largest turn rate
+
+    def offset(self, behind):
+        """How far out from the side [m] the lane runs ``behind`` [m] behind the hole (< 0 inside)."""
+        f = min(1.0, max(behind - self.level, 0.0) / (self.standoff - self.level))
+        return self.gap * f - self.press * (1.0 - f)
+
+
+@dataclass(frozen=True)
+class KnobCommand:
+    """The mover robot's command (v [m/s], w [rad/s]) and the phase that gave it."""
+
+    v: float
+    w: float
+    phase: str
+
+
+def lane_state(pair, mover, pose_i, pose_j, lane):
+    """(behind [m], off the lane [m, + outwards], heading difference [rad]) of the moving connection point
+    (the knob, or the hole when the hole robot moves) in the holding robot's frame."""
+    if mover == "i":
+        hold_pose, hold_pt, move_pose, move_pt = pose_j, pair.point_j, pose_i, pair.point_i
+    else:
+        hold_pose, hold_pt, move_pose, move_pt = pose_i, pair.point_i, pose_j, pair.point_j
+    q = inverse_transform_point(hold_pose, pr.world_point(move_pose, move_pt))
+    behind = float(hold_pt[0] - q[0])
+    out = math.copysign(1.0, hold_pt[1])            # the holding point's side: +y (knob) or -y (hole)
+    off = out * float(q[1] - hold_pt[1]) - lane.offset(behind)
+    dtheta = math.atan2(math.sin(move_pose[2] - hold_pose[2]), math.cos(move_pose[2] - hold_pose[2]))
+    return behind, off, dtheta, out
+
+
+def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW):
+    """The mover's command for knob pair ``pair`` (robot_i the knob robot, robot_j the hole robot).
+
+    ``mover``: "i" or "j"; ``pose_i``, ``pose_j``: (x, y, theta) [m, rad] in
+    the world; ``lane``: :class:`KnobLane`; ``phase``: the phase of the last
+    command (a mover backing out goes on to the end of its run). The line
+    follower steers the heading difference ``a`` to the lane's own heading
+    ``a_lane`` less a cut towards the lane, proportional to the offset ``e``
+    from it (along the holder's +y)::
+
+        w = -v k sin(a - a_want),  a_want = a_lane - clip(k e / 4, +-MAX_CUT),  k = steer_gain
+
+    near the lane a critically damped approach over the distance travelled.
+    """
+    behind, off, dtheta, out = lane_state(pair, mover, pose_i, pose_j, lane)
+    need = min(lane.standoff_max, abs(off) / math.tan(MAX_CUT) + lane.standoff)
+    if phase == BACKOFF and behind < need + lane.lookahead or abs(off) > OFF_LANE and behind < need:
+        return KnobCommand(-lane.speed, 0.0, BACKOFF)
+    v = max(-0.5 * lane.speed, min(lane.speed, lane.speed_gain * behind))
+    if behind > -OVERRUN:                              # on into the hole: the knob's detent stops it there,
+        v = max(v, lane.creep)                         # and the push straightens the mover against the side
+    k = lane.steer_gain
+    slope = -out * (lane.gap + lane.press) / (lane.standoff - lane.level) if lane.level < behind < lane.standoff \
+        else 0.0
+    e_left = out * off                                 # the offset along the holder's +y
+    want = math.atan(slope) - max(-MAX_CUT, min(MAX_CUT, 0.25 * k * e_left))
+    w = -max(v, 0.0) * k * math.sin(dtheta - want)
+    return KnobCommand(v, max(-lane.turn_rate, min(lane.turn_rate, w)), FOLLOW)
