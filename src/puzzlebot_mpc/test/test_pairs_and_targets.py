@@ -351,3 +351,23 @@ def test_a_knob_pair_is_coupled_only_with_the_knob_in_the_hole_for_the_confirm_s
     # without the tolerance (Seating's default) the knob region decides at once, 3 mm off included
     loose = pr.make_pair("k", "h", pr.KNOB, GEO)
     assert pr.update_status(loose, off, h, GEO, 0.0015) == pr.HEAD_INSERTED
+
+
+@pytest.mark.parametrize("first", [pr.KNOB, pr.ANCHOR])
+def test_a_bridge_forms_the_pairs_of_its_first_type_first(first):
+    # a 2 x 2 bridge: anchor pairs f1->b1 and f2->b2 (front to back), knob pairs f1->f2 and b1->b2 (side by side)
+    anchors = [pr.make_pair("f1", "b1", pr.ANCHOR, GEO), pr.make_pair("f2", "b2", pr.ANCHOR, GEO)]
+    knobs = [pr.make_pair("f1", "f2", pr.KNOB, GEO), pr.make_pair("b1", "b2", pr.KNOB, GEO)]
+    poses = {n: (0.0, 0.0, 0.0) for n in ("f1", "f2", "b1", "b2")}
+    book = pr.PairBook(GEO, EPS, 0.005, max_seeds=1, first=first)
+    book.set_goals(anchors + knobs)
+    firsts, seconds = (knobs, anchors) if first == pr.KNOB else (anchors, knobs)
+    # both parts (rows or chains) form at once: each is its own target for the seed limit
+    assert sorted(p.key for p in book.assign_active(poses)) == sorted(p.key for p in firsts)
+    for p in firsts:
+        book.add_coupled(p)
+        book.goals.remove(p)
+    book.active = []
+    # then one pair of the other type joins the two parts; the other closes the loop
+    active = book.assign_active(poses)
+    assert len(active) == 1 and active[0] in seconds

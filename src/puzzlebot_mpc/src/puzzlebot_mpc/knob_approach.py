@@ -56,7 +56,7 @@ class KnobLane:
     standoff_max: float = 0.15     # longest run a mover off its lane backs off for
     speed: float = 0.02            # m/s: largest speed along the lane
     speed_gain: float = 0.5        # 1/s: speed per metre left to the hole ...
-    creep: float = 0.003           # m/s: ... but at least this until the hole
+    creep: float = 0.003           # m/s: ... and from the hole on (into the knob's detent) this
     steer_gain: float = 80.0       # 1/m: the line follower's gain (about 2/gain of travel onto the lane)
     turn_rate: float = 0.4         # rad/s: largest turn rate
 

@@ -385,6 +385,8 @@ class PairBook:
     repair: bool = False                 # re-seat coupled pairs found open (a couple behaviour runs)
     max_seeds: int = 0                   # sub-assemblies that may form at once per target (0: no limit)
     seed_at: str = "middle"              # where a seed starts in its target: "middle" or "tail" (_seed_rank)
+    first: int = ANCHOR                  # the pair type a target forms first (ANCHOR: chains, then knob pairs
+                                         # join them side by side; KNOB: rows, then anchor pairs join them)
     reseats: int = 0                     # pairs sent back to be re-seated so far
 
     @classmethod
@@ -392,7 +394,8 @@ class PairBook:
         """The pair book of an MPC's settings (MPCSettings: status margins, seating, docking)."""
         return cls(geometry, settings.pair_epsilon, settings.pair_lost_margin, settings.seating(),
                    dock_settings=settings.docking_settings(), max_seeds=settings.assembly_seeds,
-                   seed_at=settings.assembly_seed_at)
+                   seed_at=settings.assembly_seed_at,
+                   first=KNOB if settings.assembly_first == "knob" else ANCHOR)
 
     def assemblies(self, names):
         """{robot: its assembly (robots in ``names`` order)} over the coupled pairs, computed once per change
@@ -462,10 +465,13 @@ class PairBook:
         growing first, then seeding, then joining.
         A goal pair between two robots of the same assembly (closing a loop,
         e.g. the last knob pair of a grid) holds on both sides.
-        Knob pairs join finished chains: a target's chains (its anchor pairs)
-        are the targets the seed limit counts, and a knob pair waits until no
-        anchor pair is left among the goals, so a grid or a bridge forms its
-        lines in parallel first and then joins them side by side.
+        A target with both kinds of pair forms those of type ``first`` first:
+        the parts they make (its chains for ANCHOR, its rows for KNOB) are the
+        targets the seed limit counts, and a pair of the other type waits
+        until none of type ``first`` is left among the goals. With ANCHOR a
+        grid or a bridge forms its lines in parallel and then joins them side
+        by side; with KNOB it forms its rows (knob pairs of single robots) and
+        then joins them front to back.
         """
         missing = {n for n, p in poses.items() if p is None}
         order = (lambda q: self.priority.get(q.key, 0.0)) if self.priority else None
@@ -485,8 +491,8 @@ class PairBook:
 
         keep = [q for q in ranked if (q in self.active or underway(q)) and not set(q.robots) & missing]
         keep.sort(key=lambda q: not underway(q))
-        chains_left = any(q.type == ANCHOR for q in self.goals)
-        graph = self._goal_graph(anchors_only=chains_left) if self.max_seeds else {}
+        parts_left = any(q.type == self.first for q in self.goals)
+        graph = self._goal_graph(only=self.first if parts_left else None) if self.max_seeds else {}
         eccentricity = self._seed_rank(graph) if self.max_seeds else {}
         rest = sorted((q for q in ranked if q not in keep and not set(q.robots) & missing),
                       key=lambda q: (kinds[kind(q)], eccentricity.get(q.key, 0)))
@@ -500,7 +506,7 @@ class PairBook:
         for q in keep + rest:
             if q.robot_i in used or q.robot_j in used:
                 continue
-            if q.type == KNOB and chains_left and q not in keep:
+            if q.type != self.first and parts_left and q not in keep:
                 continue
             gi, gj = group_of[q.robot_i], group_of[q.robot_j]
             mover = mover_of(q, len(gi), len(gj)) if gi != gj else None
@@ -526,13 +532,13 @@ class PairBook:
         self.active = chosen
         return self.active
 
-    def _goal_graph(self, anchors_only=False):
+    def _goal_graph(self, only=None):
         """{robot: set of neighbours} over the coupled and the goal pairs: the targets being formed (one
-        connected component per target; a couple request with groups has several). ``anchors_only``: over
-        the anchor pairs alone, one component per chain of a target (the knob pairs join chains)."""
+        connected component per target; a couple request with groups has several). ``only``: over the
+        pairs of that type alone (ANCHOR: one component per chain of a target; KNOB: per row)."""
         edges = {}
         for q in list(self.coupled.values()) + self.goals:
-            if anchors_only and q.type != ANCHOR:
+            if only is not None and q.type != only:
                 continue
             edges.setdefault(q.robot_i, set()).add(q.robot_j)
             edges.setdefault(q.robot_j, set()).add(q.robot_i)

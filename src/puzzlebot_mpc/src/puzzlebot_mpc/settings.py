@@ -7,13 +7,16 @@ differ.
 """
 
 from dataclasses import dataclass
+from dataclasses import fields as dc_fields
 
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.hardware import CONTROL_PERIOD, V_MAX, W_MAX
 from puzzlebot_common.params import from_mapping, require_positive
 from puzzlebot_mpc.docking import DockingSettings
+from puzzlebot_mpc.knob_approach import KnobLane
 
 _DOCK = DockingSettings()   # the docking defaults have one home: puzzlebot_mpc/docking.py
+_KNOB = KnobLane()          # the knob approach's: puzzlebot_mpc/knob_approach.py
 
 
 @dataclass(frozen=True)
@@ -75,19 +78,20 @@ class MPCSettings:
     approach_standoff_max: float = 0.03   # m: largest standoff of a misaligned anchor pair's approach target
     approach_gain_angle: float = 0.04     # m/rad: standoff per radian of heading error
     approach_gain_lateral: float = 2.0    # m/m: standoff per metre of lateral offset of the head
-    knob_standoff: float = 0.02      # m: a knob pair's mover comes along its partner's side on a lane
-                                     # knob_lane_gap out from it, then on a straight line over the last
-                                     # knob_standoff to knob_press inside the side at the hole
-                                     # (puzzlebot_mpc.knob_approach)
-    knob_lane_gap: float = 0.0015    # m
-    knob_press: float = 0.0005       # m
-    knob_level: float = 0.005        # m: ... reached this far behind the hole, then straight on into it
-    knob_standoff_max: float = 0.15  # m: longest run a knob pair's mover off its lane backs off for
-    knob_speed: float = 0.02         # m/s: largest speed of a knob pair's mover along the lane ...
-    knob_speed_gain: float = 0.5     # 1/s: ... slowing to the hole at this speed per metre left
-    knob_steer_gain: float = 80.0    # 1/m: ... following the lane with this gain (about 2/gain of travel to
-                                     # get onto it)
-    knob_turn_rate: float = 0.4      # rad/s: ... turning at most this fast
+    knob_standoff: float = _KNOB.standoff    # m: a knob pair's mover comes along its partner's side on a
+                                     # lane knob_lane_gap out from it, closes in from knob_standoff behind
+                                     # the hole to knob_press inside the side knob_level behind it, and runs
+                                     # on straight into the hole (puzzlebot_mpc.knob_approach)
+    knob_lane_gap: float = _KNOB.gap         # m
+    knob_press: float = _KNOB.press          # m
+    knob_level: float = _KNOB.level          # m
+    knob_standoff_max: float = _KNOB.standoff_max  # m: longest run a knob pair's mover off its lane backs off for
+    knob_speed: float = _KNOB.speed          # m/s: largest speed of a knob pair's mover along the lane ...
+    knob_speed_gain: float = _KNOB.speed_gain    # 1/s: ... slowing to the hole at this speed per metre left ...
+    knob_creep: float = _KNOB.creep          # m/s: ... creeping from the hole on at this speed ...
+    knob_steer_gain: float = _KNOB.steer_gain    # 1/m: ... following the lane with this gain ...
+    knob_turn_rate: float = _KNOB.turn_rate  # rad/s: ... turning at most this fast (an assembly: at most
+                                     # assembly_turn_rate)
     knob_seat_tolerance: float = 0.001   # m: a knob pair is coupled when the knob point is this close to the
                                      # hole point (along the side and across it; the hole's play is
                                      # 0.5 mm) for insert_confirm_steps steps
@@ -131,6 +135,9 @@ class MPCSettings:
     stage_standoff: float = 0.0      # m: a robot whose goal pair waits for a busy partner drives to where the
                                      # pair's connection points are this far apart, lined up (0: it waits in
                                      # place; behaviors/couple.py)
+    assembly_first: str = "knob"     # a target with anchor and knob pairs forms these first: "anchor" (its chains,
+                                     # then knob pairs join them side by side) or "knob" (its rows, then anchor
+                                     # pairs join them front to back)
     assembly_seed_at: str = "middle"  # where a chain's seed starts: "middle" (it grows at both ends) or "tail"
                                      # (the last pair: every robot that joins backs its anchor in)
     # docking an anchor pair and proving it seated (puzzlebot_mpc/docking.py; dock_* = DockingSettings fields)
@@ -171,22 +178,16 @@ class MPCSettings:
     def docking_settings(self):
         """The docking manoeuvre's settings (puzzlebot_mpc.docking.DockingSettings), None when ``docking``
         is off."""
-        from dataclasses import fields as dc_fields
-
         if not self.docking:
             return None
         return DockingSettings(**{f.name: getattr(self, "dock_" + f.name) for f in dc_fields(DockingSettings)})
 
     def knob_lane(self):
-        """The knob pairs' approach lane (puzzlebot_mpc.knob_approach.KnobLane)."""
-        from puzzlebot_mpc.knob_approach import KnobLane
-
-        return KnobLane(standoff=self.knob_standoff, gap=self.knob_lane_gap, press=self.knob_press,
-                        level=self.knob_level,
-                        lookahead=self.approach_lookahead, standoff_max=self.knob_standoff_max,
-                        speed=self.knob_speed,
-                        speed_gain=self.knob_speed_gain, steer_gain=self.knob_steer_gain,
-                        turn_rate=self.knob_turn_rate)
+        """The knob pairs' approach lane (puzzlebot_mpc.knob_approach.KnobLane); its look-ahead is the anchor
+        approach's."""
+        return KnobLane(**{f.name: getattr(self, "knob_" + f.name) for f in dc_fields(KnobLane)
+                           if f.name not in ("gap", "lookahead")}, gap=self.knob_lane_gap,
+                        lookahead=self.approach_lookahead)
 
     def seating(self):
         """The pair status tests' lining-up conditions (puzzlebot_mpc.pairs.Seating)."""
@@ -206,7 +207,7 @@ class MPCSettings:
                                 "dw_max", "max_iter", "goal_tolerance", "assembly_speed", "assembly_turn_rate", "pose_timeout", "sqp_iterations",
                                 "sqp_iterations_cold", "solver_threads", "active_set_iterations", "pair_epsilon",
                                 "pair_lost_margin", "knob_standoff", "knob_speed", "knob_speed_gain",
-                                "knob_steer_gain", "knob_turn_rate",
+                                "knob_creep", "knob_steer_gain", "knob_turn_rate",
                                 "wiggle_period",
                                 "wiggle_cycles",
                                 "hardware_v_max", "hardware_w_max", "insert_lateral_tolerance",
@@ -228,6 +229,12 @@ class MPCSettings:
         if self.constraint_horizon > self.horizon:
             raise ConfigError("%s.constraint_horizon (%d) must be <= horizon (%d)"
                               % (where, self.constraint_horizon, self.horizon))
+        if not self.knob_level < self.knob_standoff:
+            raise ConfigError("%s.knob_level (%g m) must be below knob_standoff (%g m): the lane closes in between "
+                              "them" % (where, self.knob_level, self.knob_standoff))
+        if self.assembly_first not in ("anchor", "knob"):
+            raise ConfigError("%s.assembly_first: unknown pair type %r; known: anchor, knob"
+                              % (where, self.assembly_first))
         if self.assembly_seed_at not in ("middle", "tail"):
             raise ConfigError("%s.assembly_seed_at: unknown place %r; known: middle, tail"
                               % (where, self.assembly_seed_at))
