@@ -49,7 +49,7 @@ def test_a_mover_beside_the_hole_but_off_its_lane_backs_straight_out():
 def test_the_knob_arrives_at_the_hole_pressed_on_the_side_and_parallel(start):
     pose, phases = drive(start, 40.0)
     behind, off, dtheta, _ = ka.lane_state(knob_pair(), "i", pose, HOLE_ROBOT, LANE)
-    assert abs(behind) < ka.OVERRUN + 0.0005              # at the hole (no detent here: the creep overruns)
+    assert abs(behind) < ka.HOME + 0.0005              # at the hole (within HOME of it)
     out = off + LANE.offset(behind)                       # the knob's distance out from the side
     assert -LANE.press - 0.001 < out < 0.001              # on the side (the seat test's 1 mm)
     assert abs(dtheta) < GEO.knob_yaw_tolerance
@@ -66,5 +66,5 @@ def test_a_moving_hole_robot_comes_to_the_knob_the_same_way():
         for _ in range(10):
             pose = unicycle_arc(pose, cmd.v, cmd.w, 0.01)
     behind, off, dtheta, _ = ka.lane_state(pair, "j", (0.0, 0.0, 0.0), pose, LANE)
-    assert abs(behind) < ka.OVERRUN + 0.0005 and abs(dtheta) < GEO.knob_yaw_tolerance
+    assert abs(behind) < ka.HOME + 0.0005 and abs(dtheta) < GEO.knob_yaw_tolerance
     assert -LANE.press - 0.001 < pose[1] - GEO.body_side < 0.001     # h's right side on k's left side

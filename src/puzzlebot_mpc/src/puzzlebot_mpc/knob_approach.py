@@ -23,10 +23,10 @@ twist :func:`command` gives the mover robot:
   while it turns jack-knifes), to ``need + lookahead`` behind;
 - *follow*: a line follower on the lane (offset and heading fed back,
   ``steer_gain``) at up to ``speed``, slowing to the hole at ``speed_gain``
-  per metre left, turning at most ``turn_rate``; from the hole on it creeps
-  (``creep``): the knob's detent holds it there, and the push straightens
-  it against the partner's side, which closes the last millimetre at the
-  knob. A mover more than OVERRUN past the hole (the knob not in it) backs.
+  per metre left but at least ``creep``, turning at most ``turn_rate``; at
+  the hole it turns to its partner's heading about its connection point
+  (on the axle's line, a pivot a differential drive can turn about); past
+  the hole it backs.
 
 Algorithm 2's knob test (``knob_seat_tolerance`` for ``insert_confirm_steps``
 steps, puzzlebot_mpc.pairs) then finds the pair coupled.
@@ -41,15 +41,15 @@ from puzzlebot_mpc import pairs as pr
 BACKOFF, FOLLOW = "backoff", "follow"
 MAX_CUT = 0.35          # rad: the steepest angle at which a mover cuts towards its lane
 OFF_LANE = 0.003        # m: a mover this far off its lane is off it (and may back off to get onto it)
-OVERRUN = 0.002         # m: a mover creeps on until its point is this far past the hole (its knob out of it)
+HOME = 0.0005           # m: a moving point this close behind the hole (or past it) is there
 
 
 @dataclass(frozen=True)
 class KnobLane:
     """The lane a knob pair's mover follows, in the holding robot's frame (lengths [m])."""
 
-    standoff: float = 0.02         # the lane closes in from this far behind the hole ...
-    gap: float = 0.0015            # ... and this far out from the side ...
+    standoff: float = 0.028        # the lane closes in from this far behind the hole ...
+    gap: float = 0.003             # ... and this far out from the side ...
     press: float = 0.0005          # ... to this far inside the side ...
     level: float = 0.005           # ... this far behind the hole, and runs straight on into it
     lookahead: float = 0.04        # a mover that backs off goes this far beyond its run
@@ -109,12 +109,19 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW):
     if phase == BACKOFF and behind < need + lane.lookahead or abs(off) > OFF_LANE and behind < need:
         return KnobCommand(-lane.speed, 0.0, BACKOFF)
     v = max(-0.5 * lane.speed, min(lane.speed, lane.speed_gain * behind))
-    if behind > -OVERRUN:                              # on into the hole: the knob's detent stops it there,
-        v = max(v, lane.creep)                         # and the push straightens the mover against the side
+    if behind > HOME:                                  # at least a creep up to the hole
+        v = max(v, lane.creep)
     k = lane.steer_gain
     slope = -out * (lane.gap + lane.press) / (lane.standoff - lane.level) if lane.level < behind < lane.standoff \
         else 0.0
     e_left = out * off                                 # the offset along the holder's +y
     want = math.atan(slope) - max(-MAX_CUT, min(MAX_CUT, 0.25 * k * e_left))
-    w = -max(v, 0.0) * k * math.sin(dtheta - want)
-    return KnobCommand(v, max(-lane.turn_rate, min(lane.turn_rate, w)), FOLLOW)
+    if behind > HOME:
+        w = -max(v, 0.0) * k * math.sin(dtheta - want)
+        return KnobCommand(v, max(-lane.turn_rate, min(lane.turn_rate, w)), FOLLOW)
+    if behind < -HOME:                                 # past the hole: back to it
+        return KnobCommand(v, 0.0, FOLLOW)
+    # at the hole: the mover turns to its partner's heading about its connection point (on the axle's
+    # line: a centre speed of w times the point's y pivots there)
+    w = max(-lane.turn_rate, min(lane.turn_rate, -lane.creep * k * math.sin(dtheta)))
+    return KnobCommand(w * (pair.point_i if mover == "i" else pair.point_j)[1], w, FOLLOW)

@@ -61,7 +61,7 @@ class RobotParams:
     #                                   bottom (0 = square edges; 0 or >= 2 mm, Bullet's margin; not measured)
     top_chamfer: float = 0.0         # m, the same along the top front and back edges: how far two coupled
     #                                   robots fold concave before their tops meet (docs/sim.md; not measured)
-    side_fillet: float = 0.003       # m, radius of the four vertical corner edges (0 = square; 0 or >= 2 mm;
+    side_fillet: float = 0.0         # m, radius of the four vertical corner edges (0 = square; 0 or >= 2 mm;
     #                                   a printed body's edges are rounded; not measured)
     # wheels (pilots: two pairs at x = +/-pilot_wheel_x)
     wheel_radius: float = 0.010      # m
@@ -114,8 +114,8 @@ class RobotParams:
     # the knob gives way: the lab prints the body in TPU (NinjaFlex), whose side flexes when a
     # neighbour's side presses the knob; modelled as a plunger on a prismatic joint along +y that a
     # spring pushes out. Not measured yet (docs/lab-measurements.md, item 10)
-    knob_travel: float = 0.0045      # m, how far a pressed knob goes into its side (0: a rigid knob)
-    knob_spring_force: float = 0.1   # N, the spring's force pushing the knob out (the drive pushes 0.5 N)
+    knob_travel: float = 0.0045      # m, how far a pressed knob goes into its side (0: a rigid knob; not measured)
+    knob_spring_force: float = 0.1   # N, the spring's force pushing the knob out (the drive pushes 0.5 N; not measured)
     knob_mass: float = 0.002         # kg, the knob plunger
 
     @classmethod
