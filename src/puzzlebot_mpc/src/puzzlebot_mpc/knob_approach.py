@@ -6,15 +6,17 @@ into its hole. A sprung knob (the body's side gives, puzzlebot_sim
 ``knob_travel``) gets in by sliding: the mover drives along the partner's
 side on a lane ``gap`` out from it, closes in on a straight line from
 ``standoff`` behind the hole to ``press`` inside the side ``level`` behind it,
-and runs on straight into the hole: the knob meets the side's corner at a
-glancing angle and is pressed in (head-on it would push the partner away),
-slides along the side, pressed, and springs into the hole.
+and runs on straight into the hole: passing the side's square corner
+``gap`` out, the knob meets it at a glancing angle and is pressed in (nearer
+the side the corner meets it head on and pushes the partner away), slides
+along the side, pressed, and springs into the hole.
 
 The MPC's alignment cost cannot steer an assembly (a chain joining another
 side by side) along such a lane: its coupling polygons let a robot back
 25 mm into its partner's mouth, so the planned motion turns one robot while
-its partners stand. Here the mover's assembly moves as one body with the
-twist :func:`command` gives the mover robot:
+its partners stand. Here the MPC tracks the twist :func:`command` gives the
+mover robot (its couplings and the stage edges still hold), the rest of its
+assembly the rigid-body speeds that go with it (Couple.knob_objectives):
 
 - *back off*: a mover more than OFF_LANE off its lane that needs a longer
   run to get onto it than it has (less than ``need = min(standoff_max,
