@@ -368,3 +368,25 @@ def test_a_rigid_knob_on_the_same_path_does_not_get_in():
     # the same path with a rigid knob: it cannot pass pz1's corner, so the pair does not seat
     pair, _ = _slide_alongside(RobotParams(knob_travel=0.0))
     assert pair is None or pair.status != HEAD_INSERTED, pair
+
+
+def test_the_sprung_knob_leaves_the_robots_mass_and_centre_of_mass_as_the_rigid_one():
+    # the plunger is a link of its own; the body's inertial origin balances it, so the robot's total
+    # mass and centre of mass (knob out) are those of the robot with the knob part of its body
+    def mass_and_centre(p):
+        root = ET.fromstring(robot_urdf(p))
+        origins = {j.find("child").get("link"): [float(v) for v in j.find("origin").get("xyz").split()]
+                   for j in root.findall("joint")}
+        total, moment = 0.0, [0.0, 0.0, 0.0]
+        for link in root.findall("link"):
+            inertial = link.find("inertial")
+            m = float(inertial.find("mass").get("value"))
+            xyz = [float(v) for v in inertial.find("origin").get("xyz").split()]
+            at = [a + b for a, b in zip(origins.get(link.get("name"), [0.0, 0.0, 0.0]), xyz)]
+            total += m
+            moment = [mo + m * a for mo, a in zip(moment, at)]
+        return total, [mo / total for mo in moment]
+
+    sprung, rigid = mass_and_centre(RobotParams()), mass_and_centre(RobotParams(knob_travel=0.0))
+    assert sprung[0] == pytest.approx(rigid[0])
+    assert sprung[1] == pytest.approx(rigid[1], abs=1e-9)

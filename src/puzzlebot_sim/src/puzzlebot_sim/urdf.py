@@ -283,8 +283,11 @@ def robot_urdf(p, name="puzzlebot", pilot=False):
                              axis="0 1 0", limit=(-p.knob_travel, 0.0)))
     else:
         body += _shape(knob, (0.0, p.body_side / 2, p.knob_z), color="knob")
+    # the body's centre of mass where the plunger's own leaves the robot's at the body centre (out, at rest)
+    com = (0.0, -p.knob_mass * p.body_side / 2 / m_body, -p.knob_mass * p.knob_z / m_body) \
+        if p.knob_travel > 0.0 else (0.0, 0.0, 0.0)
     links.insert(0, '<link name="base_link">%s%s</link>' % (
-        _inertial(m_body, _box_inertia(m_body, p.body_side, p.body_side, p.body_height)), body))
+        _inertial(m_body, _box_inertia(m_body, p.body_side, p.body_side, p.body_height), com), body))
     wheel_rpy = (-math.pi / 2, 0.0, 0.0)
     # about the axle: the wheel's own inertia plus the gear motor's reflected rotor inertia; the same
     # about the other axes (Bullet rejects tensors that break the triangle inequality)
