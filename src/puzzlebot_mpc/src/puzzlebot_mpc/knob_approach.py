@@ -58,7 +58,7 @@ class KnobLane:
     standoff_max: float = 0.15     # longest run a mover off its lane backs off for
     speed: float = 0.02            # m/s: largest speed along the lane
     speed_gain: float = 0.5        # 1/s: speed per metre left to the hole ...
-    creep: float = 0.003           # m/s: ... and from the hole on (into the knob's detent) this
+    creep: float = 0.003           # m/s: ... but at least this up to the hole (and the scale of the turn there)
     steer_gain: float = 80.0       # 1/m: the line follower's gain (about 2/gain of travel onto the lane)
     turn_rate: float = 0.4         # rad/s: largest turn rate
 
@@ -78,8 +78,9 @@ class KnobCommand:
 
 
 def lane_state(pair, mover, pose_i, pose_j, lane):
-    """(behind [m], off the lane [m, + outwards], heading difference [rad]) of the moving connection point
-    (the knob, or the hole when the hole robot moves) in the holding robot's frame."""
+    """(behind [m], off the lane [m, + outwards], heading difference [rad], the holding point's side: +1 for
+    +y, -1 for -y) of the moving connection point (the knob, or the hole when the hole robot moves) in the
+    holding robot's frame."""
     if mover == "i":
         hold_pose, hold_pt, move_pose, move_pt = pose_j, pair.point_j, pose_i, pair.point_i
     else:
