@@ -37,7 +37,7 @@ steps, puzzlebot_mpc.pairs) then finds the pair coupled.
 import math
 from dataclasses import dataclass
 
-from puzzlebot_common.geometry import inverse_transform_point
+from puzzlebot_common.geometry import wrap_angle
 from puzzlebot_mpc import pairs as pr
 
 BACKOFF, FOLLOW = "backoff", "follow"
@@ -85,11 +85,11 @@ def lane_state(pair, mover, pose_i, pose_j, lane):
         hold_pose, hold_pt, move_pose, move_pt = pose_j, pair.point_j, pose_i, pair.point_i
     else:
         hold_pose, hold_pt, move_pose, move_pt = pose_i, pair.point_i, pose_j, pair.point_j
-    q = inverse_transform_point(hold_pose, pr.world_point(move_pose, move_pt))
+    q = pr.point_in_robot(hold_pose, pr.world_point(move_pose, move_pt))
     behind = float(hold_pt[0] - q[0])
     out = math.copysign(1.0, hold_pt[1])            # the holding point's side: +y (knob) or -y (hole)
     off = out * float(q[1] - hold_pt[1]) - lane.offset(behind)
-    dtheta = math.atan2(math.sin(move_pose[2] - hold_pose[2]), math.cos(move_pose[2] - hold_pose[2]))
+    dtheta = wrap_angle(move_pose[2] - hold_pose[2])
     return behind, off, dtheta, out
 
 
