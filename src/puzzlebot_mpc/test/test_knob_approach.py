@@ -68,3 +68,48 @@ def test_a_moving_hole_robot_comes_to_the_knob_the_same_way():
     behind, off, dtheta, _ = ka.lane_state(pair, "j", (0.0, 0.0, 0.0), pose, LANE)
     assert abs(behind) < ka.HOME + 0.0005 and abs(dtheta) < GEO.knob_yaw_tolerance
     assert -LANE.press - 0.001 < pose[1] - GEO.body_side < 0.001     # h's right side on k's left side
+
+
+def test_a_mover_already_alongside_the_side_closes_in_without_backing_out_past_the_corner():
+    # 4 mm out from the side, 20 mm behind the hole: past the partner's corner, it needs only the run to cut
+    # onto the lane (|e| / tan(MAX_CUT) + level, 16 mm), not the corner's standoff (39 mm)
+    alongside = (-0.02, -GEO.body_side - 0.004, 0.0)
+    assert ka.command(knob_pair(), "i", alongside, HOLE_ROBOT, LANE).phase == ka.FOLLOW
+    pose, phases = drive(alongside, 20.0)
+    behind, off, dtheta, _ = ka.lane_state(knob_pair(), "i", pose, HOLE_ROBOT, LANE)
+    assert phases == [ka.FOLLOW] and abs(behind) < ka.HOME + 0.0005 and abs(dtheta) < GEO.knob_yaw_tolerance
+    # before the corner, 5 mm off the lane (3 mm out there), it needs the full run: it backs out first
+    before = (-0.03, -GEO.body_side - 0.008, 0.0)
+    assert ka.command(knob_pair(), "i", before, HOLE_ROBOT, LANE).phase == ka.BACKOFF
+
+
+def test_a_blocked_back_off_is_given_up_for_a_while_and_one_that_moves_is_not():
+    watch = ka.ProgressWatch()
+
+    def at(behind):                                          # on the lane, parallel
+        return (behind, 0.0, 0.0, -1.0)
+    assert watch.advise(ka.BACKOFF, at(0.002), 0.0, LANE) == (True, False)
+    for k in range(1, int(round(ka.BACKOFF_STALL / 0.1))):   # backing, but stuck 2 mm behind the hole
+        assert watch.advise(ka.BACKOFF, at(0.0025), 0.1 * k, LANE) == (True, False)
+    t = ka.BACKOFF_STALL + 0.05
+    assert watch.advise(ka.BACKOFF, at(0.0025), t, LANE) == (False, False)   # blocked: follow from here ...
+    assert watch.advise(ka.FOLLOW, at(0.0025), t + ka.BACKOFF_REST - 0.1, LANE)[0] is False
+    assert watch.advise(ka.FOLLOW, at(0.0025), t + ka.BACKOFF_REST + 0.1, LANE)[0] is True   # ... for a while
+    moving = ka.ProgressWatch()
+    assert all(moving.advise(ka.BACKOFF, at(0.001 * k), 0.1 * k, LANE) == (True, False) for k in range(60))
+
+
+def test_a_mover_that_gets_no_nearer_the_hole_alongside_its_partner_backs_off_and_comes_again():
+    watch, stuck = ka.ProgressWatch(), (0.015, 0.0, 0.0, -1.0)          # 15 mm behind the hole, on the lane
+    n = int(round(ka.FOLLOW_STALL / 0.1))
+    advice = [watch.advise(ka.FOLLOW, stuck, 0.1 * k + 0.01, LANE) for k in range(n + 1)]
+    assert advice[-1] == (True, True) and all(a == (True, False) for a in advice[:-1])
+    cmd = ka.command(knob_pair(), "i", (-0.015, -GEO.body_side - LANE.offset(0.015), 0.0), HOLE_ROBOT, LANE,
+                     retry=True)
+    assert cmd.phase == ka.BACKOFF and cmd.v < 0.0
+    # one that comes nearer, or is turning onto its lane far from its partner, is left alone
+    closing = ka.ProgressWatch()
+    assert not any(closing.advise(ka.FOLLOW, (0.025 - 0.003 * 0.1 * k, 0.0, 0.0, -1.0), 0.1 * k, LANE)[1]
+                   for k in range(60))
+    turning = ka.ProgressWatch()
+    assert not any(turning.advise(ka.FOLLOW, (0.015, 0.0, 0.8, -1.0), 0.1 * k, LANE)[1] for k in range(60))

@@ -10,6 +10,7 @@ from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.config_files import load_target_file
+from puzzlebot_mpc.settings import MPCSettings
 from puzzlebot_mpc.targets import (TargetError, assign, assignment_cost, brute_force_assignment, distance_mst,
                                    generate, make_target, place, resolve_target)
 
@@ -351,6 +352,37 @@ def test_a_knob_pair_is_coupled_only_with_the_knob_in_the_hole_for_the_confirm_s
     # without the tolerance (Seating's default) the knob region decides at once, 3 mm off included
     loose = pr.make_pair("k", "h", pr.KNOB, GEO)
     assert pr.update_status(loose, off, h, GEO, 0.0015) == pr.HEAD_INSERTED
+
+
+def test_the_knob_measure_is_the_gap_out_from_the_hole_side_and_the_offset_along_it():
+    pair = pr.make_pair("k", "h", pr.KNOB, GEO)          # k's left knob in h's right hole: k on h's right
+    h = (0.3, 0.1, 0.5)
+    c, s = math.cos(h[2]), math.sin(h[2])
+
+    def at(along, out, dth=0.0):                          # k's pose: its centre body_side + out to h's right
+        x, y = along, -GEO.body_side - out
+        return (h[0] + c * x - s * y, h[1] + s * x + c * y, h[2] + dth)
+    gap, along, dth = pr.knob_measure(pair, at(0.002, 0.003), h)
+    assert (gap, along, dth) == pytest.approx((0.003, 0.002, 0.0), abs=1e-12)
+    assert pr.knob_offset(pair, at(0.002, 0.003), h) == pytest.approx(0.003)
+    assert pr.knob_measure(pair, at(0.0, -0.001), h)[0] == pytest.approx(-0.001)    # pressed into the side
+    assert pr.knob_measure(pair, at(0.0, 0.0, 0.05), h)[2] == pytest.approx(0.05)
+
+
+def test_a_coupled_knob_pair_off_its_hole_is_lost_when_no_couple_runs_to_close_it():
+    settings = MPCSettings()
+    book = pr.PairBook.from_settings(GEO, settings)
+    pair = pr.make_pair("k", "h", pr.KNOB, GEO)
+    book.add_coupled(pair)
+    h = (0.0, 0.0, 0.0)
+    seated, open_ = (0.0, -GEO.body_side - 0.0005, 0.0), (0.0, -GEO.body_side - 0.003, 0.0)
+    steps = int(round(settings.dock_repair_time / settings.dt))
+    for k in range(2 * steps):                              # within the knob test's tolerance: kept
+        assert book.update({"k": seated, "h": h}, now=settings.dt * k) == ([], [])
+    t0, lost = 2 * steps * settings.dt, []
+    for k in range(steps + 1):                              # the sides 3 mm apart for repair_time: lost
+        lost += book.update({"k": open_, "h": h}, now=t0 + settings.dt * k)[1]
+    assert lost == [pair] and pair.key not in book.coupled and pair.status == pr.DECOUPLED and not book.goals
 
 
 @pytest.mark.parametrize("first", [pr.KNOB, pr.ANCHOR])

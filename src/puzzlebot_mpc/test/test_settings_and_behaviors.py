@@ -1,6 +1,7 @@
 import math
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from puzzlebot_common.config import load_yaml
@@ -182,6 +183,87 @@ def test_a_couple_does_not_succeed_while_a_coupled_pair_is_open_and_the_monitor_
         status = step(0.1 * k)
         k += 1
     assert status.state == SUCCEEDED and pair.key in m.pairs.coupled
+
+
+def test_a_knob_pair_pushed_off_its_hole_goes_back_to_the_goals_and_the_couple_waits_for_it():
+    """Every goal pair coupled, but the knob pair's sides 3 mm apart (pushed open by a row docking behind
+    it): the couple does not succeed; after dock_repair_time the pair is a goal again (decoupled: its
+    approach closes it), and once the knob is back in its hole for the confirm steps the couple succeeds.
+    Within the knob test's tolerance nothing happens."""
+    settings = MPCSettings()
+    m = BehaviorManager(["k1", "k2"], settings)
+    side = m.geometry.body_side
+    pair = pr.make_pair("k1", "k2", pr.KNOB, m.geometry)
+    m.pairs.add_coupled(pair)
+    home = (0.0, -side, 0.0)                                           # k1 right of k2: k1's knob in k2's hole
+    assert pr.knob_offset(pair, home, (0.0, 0.0, 0.0)) == pytest.approx(0.0, abs=1e-12)
+    poses = {"k1": (0.0, -side - 0.003, 0.0), "k2": (0.0, 0.0, 0.0)}
+    m.request(BehaviorRequest("couple", ["k1", "k2"], target="row", timeout=60.0), now=0.0, poses=poses)
+
+    def step(now):
+        return control_step(m, poses, now)[0]
+
+    status = step(0.1)
+    assert status.state == RUNNING and "waiting for k1-k2 to close" in status.message
+    k = 2
+    while pair.key in m.pairs.coupled:                                 # the monitor: open for dock_repair_time
+        status = step(0.1 * k)
+        assert status.state == RUNNING and k < 30
+        k += 1
+    assert k * 0.1 >= settings.dock_repair_time
+    assert m.pairs.goals == [pair] and pair.status == pr.DECOUPLED and m.pairs.reseats == 1
+    poses["k1"] = (0.0, -side - 0.5 * settings.knob_seat_tolerance, 0.0)    # back in, within the tolerance
+    for _ in range(settings.insert_confirm_steps + 1):
+        status = step(0.1 * k)
+        k += 1
+    assert status.state == SUCCEEDED and pair.key in m.pairs.coupled
+    for _ in range(int(2 * settings.dock_repair_time / 0.1)):          # seated within the tolerance: kept
+        control_step(m, poses, 0.1 * k)
+        k += 1
+    assert pair.key in m.pairs.coupled and m.pairs.reseats == 1
+
+
+def bridge_with_pairs_coupled(close):
+    """A manager coupling four robots standing as a 2 x 2 grid (rows pz1 pz3 and pz2 pz4 side by side,
+    pz1's anchor in pz2's mouth, pz3's in pz4's) with every goal pair coupled but those of type ``close``
+    (ANCHOR: one anchor pair; KNOB: one knob pair): (manager, poses, the pair left to close)."""
+    settings = MPCSettings()
+    m = BehaviorManager(["pz1", "pz2", "pz3", "pz4"], settings)
+    side = m.geometry.body_side
+    poses = {"pz1": (0.0, 0.0, 0.0), "pz2": (-side, 0.0, 0.0), "pz3": (0.0, side, 0.0), "pz4": (-side, side, 0.0)}
+    m.request(BehaviorRequest("couple", list(poses), target="grid", timeout=60.0), now=0.0, poses=poses)
+    goals = sorted(m.pairs.goals, key=lambda q: q.key)
+    left = [q for q in goals if q.type == close][0]
+    for q in goals:
+        if q is not left:
+            m.pairs.add_coupled(q)
+            m.pairs.goals.remove(q)
+    return m, poses, left
+
+
+def test_the_second_anchor_pair_between_two_rows_frees_the_opening_robots_row_to_turn_onto_it():
+    """Both rows formed (knob pairs) and joined by one anchor pair: closing the other (a loop) leaves the
+    opening robot's row free for the alignment cost, turning about the coupled anchor pair; the anchor
+    robot's row holds. A knob pair closing a loop still holds on both sides."""
+    m, poses, closing = bridge_with_pairs_coupled(pr.ANCHOR)
+    o = closing.robot_j
+    row = set(m.pairs.row_of(o))
+    (hinge,) = [q for q in m.pairs.coupled.values() if q.type == pr.ANCHOR]
+    px, py, _ = poses[hinge.robot_j]
+    px += m.geometry.body_side / 2                                      # the coupled anchor pair's mouth
+    c, sn = math.cos(0.1), math.sin(0.1)
+    for r in row:                                                       # the row turned 0.1 rad about it
+        x, y, th = poses[r]
+        poses[r] = (px + c * (x - px) - sn * (y - py), py + sn * (x - px) + c * (y - py), th + 0.1)
+    obj = control_step(m, poses, 0.1)[1]
+    assert m.pairs.active == [closing] and m.pairs.mover(closing) is None
+    assert len(row) == 2 and closing.robot_i not in row
+    for r in poses:
+        assert (not np.any(obj.velocity_mask[m.index[r]])) == (r in row), r
+    k, poses, closing = bridge_with_pairs_coupled(pr.KNOB)
+    obj = control_step(k, poses, 0.1)[1]
+    assert k.pairs.active == [closing] and k.pairs.mover(closing) is None
+    assert all(np.all(obj.velocity_mask[k.index[r]]) for r in poses)
 
 
 def test_a_seed_pairs_holder_only_turns_with_another_robot_close_by():

@@ -28,7 +28,8 @@ default: measured, the pull unseated more pairs than it caught
 Whatever seated it, a coupled pair is then watched (:class:`SeatMonitor`):
 faces more than ``repair_gap`` apart for ``repair_time`` (a pair pushed out
 of its slits by robots docking elsewhere) -> re-seated from ``push`` while
-a couple runs. The phases of one pair's manoeuvre (:class:`Docking`):
+a couple runs (a knob pair pushed off its hole goes back to the goals and
+its approach: puzzlebot_mpc.pairs). The phases of one pair's manoeuvre (:class:`Docking`):
 
 =========  ==============================================================
 phase      what the mover (the robot that docks) does
@@ -436,20 +437,22 @@ class Docking:
 
 
 class SeatMonitor:
-    """Watches a coupled anchor pair: open (gap above ``repair_gap``) for ``repair_time`` -> re-seat. (How far
-    C_a is off the opening's axis does not tell: seated pairs were measured up to 4.5 mm off it, the anchor
-    turned in its holder.)"""
+    """Watches a coupled pair: open (gap above ``limit``, default ``repair_gap``) for ``repair_time`` ->
+    re-seat. For an anchor pair the gap is seat_measure's, between the faces (how far C_a is off the
+    opening's axis does not tell: seated pairs were measured up to 4.5 mm off it, the anchor turned in its
+    holder); for a knob pair pairs.knob_offset, with the knob test's tolerance as the limit."""
 
-    def __init__(self, settings):
+    def __init__(self, settings, limit=None):
         self.s = settings
+        self.limit = settings.repair_gap if limit is None else limit
         self.bad_since = None
 
     def update(self, gap, lateral, now):
-        """True when the pair has looked open or askew for ``repair_time``: it needs re-seating."""
-        s = self.s
-        if gap > s.repair_gap:
+        """True when the pair has looked open for ``repair_time``: it needs re-seating. ``gap`` [m],
+        ``lateral`` [m] (not used), ``now`` [s]."""
+        if gap > self.limit:
             if self.bad_since is None:
                 self.bad_since = now
-            return now - self.bad_since >= s.repair_time - 1e-9
+            return now - self.bad_since >= self.s.repair_time - 1e-9
         self.bad_since = None
         return False

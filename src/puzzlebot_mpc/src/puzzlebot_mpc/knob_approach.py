@@ -20,12 +20,21 @@ assembly the rigid-body speeds that go with it (Couple.knob_objectives):
 
 - *back off*: a mover more than OFF_LANE off its lane that needs a longer
   run to get onto it than it has (less than ``need = min(standoff_max,
-  |e| / tan(MAX_CUT) + standoff)`` behind the hole, ``e`` its offset from
-  the lane) backs straight out, without turning (a chain that reverses
-  while it turns jack-knifes), to ``need + lookahead`` behind;
+  |e| / tan(MAX_CUT) + run)`` behind the hole, ``e`` its offset from the
+  lane; ``run`` is ``standoff``, or only ``level`` for a point already
+  alongside the partner's side, less than ``standoff`` behind the hole,
+  with no corner left to pass) backs straight out, without turning (a
+  chain that reverses while it turns jack-knifes), to ``need + lookahead``
+  behind. A back-off that gets nowhere (blocked by a robot behind the
+  mover) is given up for a while and the mover follows the lane from where
+  it is; a mover that gets no nearer the hole along the lane (jammed on
+  its partner's side) backs off and comes again (:class:`ProgressWatch`);
 - *follow*: a line follower on the lane (offset and heading fed back,
   ``steer_gain``) at up to ``speed``, slowing to the hole at ``speed_gain``
-  per metre left but at least ``creep``, turning at most ``turn_rate``; at
+  per metre left but at least ``creep``, turning at most ``turn_rate``; a
+  mover already inside the lane (pressed on the side) does not follow the
+  lane's slope into the side, which would press it on and drag the partner
+  along by friction; at
   the hole it turns to its partner's heading about its connection point
   (on the axle's line, a pivot a differential drive can turn about); past
   the hole it backs.
@@ -44,6 +53,11 @@ BACKOFF, FOLLOW = "backoff", "follow"
 MAX_CUT = 0.35          # rad: the steepest angle at which a mover cuts towards its lane
 OFF_LANE = 0.003        # m: a mover this far off its lane is off it (and may back off to get onto it)
 HOME = 0.0005           # m: a moving point this close behind the hole (or past it) is there
+BACKOFF_STALL = 2.0     # s: a back-off that has not gained BACKOFF_PROGRESS in this long is blocked ...
+BACKOFF_PROGRESS = 0.002  # m
+BACKOFF_REST = 10.0     # s: ... and the mover does not back off again for this long
+FOLLOW_STALL = 3.0      # s: a mover on the lane that has not come BACKOFF_PROGRESS nearer the hole in this long
+                        # is jammed: it backs off and comes again
 
 
 @dataclass(frozen=True)
@@ -93,12 +107,59 @@ def lane_state(pair, mover, pose_i, pose_j, lane):
     return behind, off, dtheta, out
 
 
-def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW):
+class ProgressWatch:
+    """Watches a knob pair's mover for progress (see the module): one per active pair.
+
+    A back-off that has not gained BACKOFF_PROGRESS in BACKOFF_STALL s is
+    blocked (a robot behind the mover): the mover does not back off again for
+    BACKOFF_REST s and follows the lane from where it is. A mover following
+    the lane that has not come BACKOFF_PROGRESS nearer the hole in
+    FOLLOW_STALL s (not yet at it: more than ``level`` behind) is jammed on
+    its partner's side (pushing along it, it drags its partner round with it
+    by friction) when it is alongside the side (less than ``standoff``
+    behind), on its lane (within OFF_LANE) and parallel (within MAX_CUT): it
+    backs off and comes along the lane again.
+    """
+
+    def __init__(self):
+        self.start = None           # (phase, time [s], behind [m]) when the current stretch started
+        self.blocked_at = None      # time [s] the last back-off was found blocked
+
+    def advise(self, phase, state, now, lane):
+        """(may back off, back off now) for the mover; ``phase``: its last command's, ``state``: its
+        lane_state (behind [m], off the lane [m], heading difference [rad], side), ``now`` [s], ``lane``: the
+        KnobLane."""
+        behind, off, dtheta, _ = state
+        if self.start is None or self.start[0] != phase:
+            self.start = (phase, now, behind)
+        resting = self.blocked_at is not None and now - self.blocked_at < BACKOFF_REST
+        _, t0, b0 = self.start
+        if phase == BACKOFF:
+            if now - t0 >= BACKOFF_STALL:
+                if behind - b0 < BACKOFF_PROGRESS:
+                    self.blocked_at, self.start = now, None
+                    return False, False
+                self.start = (phase, now, behind)
+            return not resting, False
+        if not (lane.level < behind < lane.standoff and abs(off) <= OFF_LANE and abs(dtheta) <= MAX_CUT):
+            self.start = (phase, now, behind)              # not alongside the side on the lane: no jam
+            return not resting, False
+        if now - t0 >= FOLLOW_STALL:
+            self.start = (phase, now, behind)
+            if b0 - behind < BACKOFF_PROGRESS and not resting:
+                return True, True
+        return not resting, False
+
+
+def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, retry=False):
     """The mover's command for knob pair ``pair`` (robot_i the knob robot, robot_j the hole robot).
 
     ``mover``: "i" or "j"; ``pose_i``, ``pose_j``: (x, y, theta) [m, rad] in
     the world; ``lane``: :class:`KnobLane`; ``phase``: the phase of the last
-    command (a mover backing out goes on to the end of its run). The line
+    command (a mover backing out goes on to the end of its run);
+    ``may_back_off``: False follows the lane from where the mover is;
+    ``retry``: back off now, to come along the lane again (both from
+    :class:`ProgressWatch`). The line
     follower steers the heading difference ``a`` to the lane's own heading
     ``a_lane`` less a cut towards the lane, proportional to the offset ``e``
     from it (along the holder's +y)::
@@ -108,8 +169,10 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW):
     near the lane a critically damped approach over the distance travelled.
     """
     behind, off, dtheta, out = lane_state(pair, mover, pose_i, pose_j, lane)
-    need = min(lane.standoff_max, abs(off) / math.tan(MAX_CUT) + lane.standoff)
-    if phase == BACKOFF and behind < need + lane.lookahead or abs(off) > OFF_LANE and behind < need:
+    run = lane.level if 0.0 <= behind < lane.standoff else lane.standoff     # alongside: no corner to pass
+    need = min(lane.standoff_max, abs(off) / math.tan(MAX_CUT) + run)
+    if may_back_off and (retry or phase == BACKOFF and behind < need + lane.lookahead
+                         or abs(off) > OFF_LANE and behind < need):
         return KnobCommand(-lane.speed, 0.0, BACKOFF)
     v = max(-0.5 * lane.speed, min(lane.speed, lane.speed_gain * behind))
     if behind > HOME:                                  # at least a creep up to the hole
@@ -118,7 +181,10 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW):
     slope = -out * (lane.gap + lane.press) / (lane.standoff - lane.level) if lane.level < behind < lane.standoff \
         else 0.0
     e_left = out * off                                 # the offset along the holder's +y
-    want = math.atan(slope) - max(-MAX_CUT, min(MAX_CUT, 0.25 * k * e_left))
+    # inside the lane (pressed on the partner's side harder than the lane asks) the lane's slope is not
+    # followed: heading into the side, the mover would only press on and drag its partner along
+    follow_slope = min(1.0, max(0.0, 1.0 + off / lane.press)) if lane.press > 0 else float(off >= 0.0)
+    want = math.atan(slope) * follow_slope - max(-MAX_CUT, min(MAX_CUT, 0.25 * k * e_left))
     if behind > HOME:
         w = -max(v, 0.0) * k * math.sin(dtheta - want)
         return KnobCommand(v, max(-lane.turn_rate, min(lane.turn_rate, w)), FOLLOW)

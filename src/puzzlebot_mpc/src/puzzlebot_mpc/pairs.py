@@ -210,6 +210,22 @@ def yaw_limit(pair, geometry):
     return geometry.anchor_yaw_free if pair.type == ANCHOR else geometry.knob_yaw_tolerance
 
 
+def knob_measure(pair, pose_i, pose_j):
+    """(gap [m], along [m], dtheta [rad]) of a knob pair: how far its knob point C_i is out from the hole's
+    side (> 0: the sides apart) and along the side from the hole point C_j, in robot_j's frame, and
+    robot_i's heading minus robot_j's."""
+    off = point_in_robot(pose_j, world_point(pose_i, pair.point_i)) - pair.point_j[:2]
+    outward = math.copysign(1.0, pair.point_j[1])          # the hole's side: +y (left) or -y (right)
+    return float(outward * off[1]), float(off[0]), float(alignment_error(pair, pose_i, pose_j)[1])
+
+
+def knob_offset(pair, pose_i, pose_j):
+    """How far [m] a knob pair's knob point C_i is from its hole point C_j, in robot_j's frame: the larger
+    of the offsets along the side and across it (the knob test compares it with ``Seating.knob``)."""
+    gap, along, _ = knob_measure(pair, pose_i, pose_j)
+    return max(abs(gap), abs(along))
+
+
 def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=None):
     """Algorithm 2 for one pair (not yet coupled): the new status.
 
@@ -222,8 +238,7 @@ def update_status(pair, pose_i, pose_j, geometry, eps, seating=Seating(), now=No
         if math.isinf(seating.knob):
             inside = head_margin(pair, pose_i, pose_j, geometry.knob_region()) >= -eps
         else:
-            off = point_in_robot(pose_j, world_point(pose_i, pair.point_i)) - pair.point_j[:2]
-            inside = max(abs(off[0]), abs(off[1])) <= seating.knob
+            inside = knob_offset(pair, pose_i, pose_j) <= seating.knob
         aligned = abs(alignment_error(pair, pose_i, pose_j)[1]) <= geometry.knob_yaw_tolerance
         pair.confirmed = pair.confirmed + 1 if inside and aligned else 0
         return HEAD_INSERTED if pair.confirmed >= seating.confirm_steps else DECOUPLED
@@ -577,6 +592,12 @@ class PairBook:
         robots = sorted({r for q in self.coupled.values() for r in q.robots} | {r for q in self.goals for r in q.robots})
         return {r: tuple(sorted(g)) for r, g in self.assemblies(robots).items()}
 
+    def row_of(self, robot):
+        """The robots joined to ``robot`` by coupled knob pairs (its row, side by side), itself included."""
+        knobs = [q for q in self.coupled.values() if q.type == KNOB]
+        names = sorted({robot} | {r for q in knobs for r in q.robots})
+        return next(c for c in components(names, knobs) if robot in c)
+
     def mover(self, pair):
         """"i", "j" or None (both hold: a loop closure) for an active pair (mover_of when not assigned)."""
         if pair.key in self.movers:
@@ -597,7 +618,11 @@ class PairBook:
         (:mod:`puzzlebot_mpc.docking`); Algorithm 2's status then only guides
         the approach. While ``repair`` is on (a couple behaviour runs), a
         coupled anchor pair that looks open for a while goes back to the goals
-        to be re-seated. Returns (newly coupled pairs, lost pairs).
+        to be re-seated. A coupled knob pair whose knob has been off its hole
+        by more than the knob test's tolerance for ``repair_time`` goes back
+        to the goals while a couple runs, and is lost otherwise (its knob is
+        not in the hole: the pair does not hold). Returns (newly coupled
+        pairs, lost pairs).
         """
         newly, lost = [], []
         for pair in list(self.active):
@@ -664,6 +689,16 @@ class PairBook:
                 gap, lateral, _ = seat_measure(pair, pi, pj)
                 if monitor.update(gap, lateral, now):
                     self._reseat(pair, gap, lateral, now)
+            elif pair.type == KNOB and self.dock_settings is not None and math.isfinite(self.seating.knob):
+                monitor = self.monitors.setdefault(key, SeatMonitor(self.dock_settings, self.seating.knob))
+                if monitor.update(knob_offset(pair, pi, pj), 0.0, now):
+                    if self.repair:
+                        self._reseat_knob(pair, now)
+                    else:                        # no couple to close it again: the pair is lost
+                        del self.coupled[key]
+                        self.monitors.pop(key, None)
+                        pair.status = DECOUPLED
+                        lost.append(pair)
         return newly, lost
 
     def _tugged(self):
@@ -696,6 +731,14 @@ class PairBook:
         self.docking[pair.key] = Docking(self.dock_settings, self._mover_by_size(pair), start=PUSH, now=None)
         self.docking[pair.key].note = "re-seating: %.1f mm open, %.1f mm off the axis" % (1e3 * gap, 1e3 * lateral)
         pair.status, pair.since, pair.confirmed = HEAD_ALIGNED, now, 0
+        self.goals.append(pair)
+        self.reseats += 1
+
+    def _reseat_knob(self, pair, now):
+        """A coupled knob pair found off its hole goes back to the goals: its approach closes it again."""
+        del self.coupled[pair.key]
+        self.monitors.pop(pair.key, None)
+        pair.status, pair.since, pair.confirmed = DECOUPLED, now, 0
         self.goals.append(pair)
         self.reseats += 1
 

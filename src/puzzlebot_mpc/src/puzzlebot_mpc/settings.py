@@ -94,7 +94,8 @@ class MPCSettings:
                                      # assembly_turn_rate)
     knob_seat_tolerance: float = 0.001   # m: a knob pair is coupled when the knob point is this close to the
                                      # hole point (along the side and across it; the hole's play is
-                                     # 0.5 mm) for insert_confirm_steps steps
+                                     # 0.5 mm) for insert_confirm_steps steps; while a couple runs, a
+                                     # coupled one this far off for dock_repair_time is closed again
     pair_epsilon: float = 0.0015     # m: margin of the pair status tests (Algorithm 2)
     pair_lost_margin: float = 0.005  # m: a coupled pair whose head is this far outside its polygon is lost
     insert_lateral_tolerance: float = 0.0007  # m: an anchor pair pushed home is coupled only when C_a is this

@@ -26,7 +26,7 @@ import numpy as np
 
 from puzzlebot_common.geometry import transform_point
 from puzzlebot_mpc import docking as dk
-from puzzlebot_mpc import knob_approach
+from puzzlebot_mpc import axis_approach, knob_approach
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
 from puzzlebot_mpc.targets import TargetError, assign, merge_assignments, resolve_target
@@ -104,6 +104,8 @@ class Couple(Behavior):
         self.ctx.pairs.set_goals(a.pairs, a.priority)
         self.ctx.pairs.repair = True
         self.knob_phase = {}             # knob pair key -> the phase of its mover's last command (knob_approach)
+        self.knob_watch = {}             # knob pair key -> its knob_approach.ProgressWatch
+        self.axis_phase = {}             # anchor pair key -> the phase of its assembly mover's last command
         return "goal pairs: " + ", ".join("%s->%s" % p.key for p in a.pairs)
 
     def status(self, now, poses, newly, lost, elapsed):
@@ -129,18 +131,23 @@ class Couple(Behavior):
             ", ".join(p.describe() for p in book.active) or "none"), errors=errors)
 
     def open_pairs(self, poses):
-        """The target's coupled anchor pairs whose faces are more than ``dock_repair_gap`` apart now ("i-j"
-        names; none with docking off): the couple does not succeed while one is, since the seat monitor
-        sends such a pair back to be re-seated after ``dock_repair_time``."""
+        """The target's coupled pairs that look open now ("i-j" names; none with docking off): anchor pairs
+        with their faces more than ``dock_repair_gap`` apart, knob pairs with the knob more than
+        ``knob_seat_tolerance`` off its hole. The couple does not succeed while one is, since the seat
+        monitor sends such a pair back after ``dock_repair_time``."""
         book = self.ctx.pairs
         if book.dock_settings is None:
             return []
         out = []
         for p in self.assignment.pairs:
             pi, pj = poses.get(p.robot_i), poses.get(p.robot_j)
-            if p.type != pr.ANCHOR or p.key not in book.coupled or pi is None or pj is None:
+            if p.key not in book.coupled or pi is None or pj is None:
                 continue
-            if dk.seat_measure(p, pi, pj)[0] > book.dock_settings.repair_gap:
+            if p.type == pr.ANCHOR:
+                is_open = dk.seat_measure(p, pi, pj)[0] > book.dock_settings.repair_gap
+            else:
+                is_open = pr.knob_offset(p, pi, pj) > book.seating.knob
+            if is_open:
                 out.append("%s-%s" % p.key)
         return out
 
@@ -167,24 +174,30 @@ class Couple(Behavior):
         another robot stands within ``seed_holder_clearance``); once its anchor head is in the
         opening (head_aligned) the partner holds still while the mover pushes the anchor home (otherwise
         the partner gives way and the pair drives off together, into the robots around it). A pair inside
-        one assembly (closing a loop) holds on both sides.
+        one assembly (closing a loop) holds on both sides, except that an anchor pair that closes a loop (the
+        second anchor pair between two rows of a grid or a bridge) frees the opening robot's row (its
+        robots joined by knob pairs): the alignment cost turns it about the anchor pair already coupled.
         """
         ctx, hold = self.ctx, self.hold()
         book = ctx.pairs
         for p in book.active:
             mover = ctx.mover(p)
             gi, gj = ctx.assembly_of(p.robot_i), ctx.assembly_of(p.robot_j)
-            if mover is None:
+            if mover is None:            # a loop closure: both hold; closing an anchor pair, the opening
+                row = book.row_of(p.robot_j) if p.type == pr.ANCHOR else ()   # robot's row turns onto it
                 for m in set(gi) | set(gj):
-                    obj.velocity_mask[ctx.index[m]] = hold
+                    obj.velocity_mask[ctx.index[m]] = 0.0 if m in row else hold
                 continue
             mg, hg = (gi, gj) if mover == "i" else (gj, gi)
             m_robot, h_robot = (p.robot_i, p.robot_j) if mover == "i" else (p.robot_j, p.robot_i)
             if p.type == pr.KNOB:
-                self.knob_objectives(obj, p, mover, m_robot, mg, hg, poses)
+                self.knob_objectives(obj, p, mover, m_robot, mg, hg, poses, now)
                 continue
             dock = book.docking.get(p.key)
             driven = dock is not None and dock.phase in dk.DRIVEN
+            if self.on_axis_lane(p):
+                self.axis_objectives(obj, p, mover, m_robot, mg, hg, poses)
+                continue
             seed = len(mg) == len(hg) == 1
             for m in hg:
                 free = seed and not driven and p.status != pr.HEAD_ALIGNED
@@ -211,7 +224,7 @@ class Couple(Behavior):
                     obj.open_loop[ctx.index[m]] = tuple(float(x) for x in braced[ctx.index[m]])
         self.stage(obj, poses)
 
-    def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses):
+    def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
         """A knob pair's mover robot tracks the command of :mod:`puzzlebot_mpc.knob_approach` (along its
         partner's side), the rest of its assembly the rigid-body speeds that go with it (turning as their
         couplings allow, at most assembly_turn_rate); the partner's assembly holds still."""
@@ -224,8 +237,38 @@ class Couple(Behavior):
         lane = s.knob_lane()
         if len(mg) > 1:                  # an assembly turns like a train
             lane = replace(lane, turn_rate=min(lane.turn_rate, s.assembly_turn_rate))
-        cmd = knob_approach.command(pair, mover, pi, pj, lane, self.knob_phase.get(pair.key, knob_approach.FOLLOW))
+        phase = self.knob_phase.get(pair.key, knob_approach.FOLLOW)
+        state = knob_approach.lane_state(pair, mover, pi, pj, lane)
+        watch = self.knob_watch.setdefault(pair.key, knob_approach.ProgressWatch())
+        free, retry = watch.advise(phase, state, now, lane)
+        cmd = knob_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free, retry=retry)
         self.knob_phase[pair.key] = cmd.phase
+        self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
+        for m in mg:
+            obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
+
+    def on_axis_lane(self, pair):
+        """True for an active anchor pair whose mover is an assembly approaching (:mod:`axis_approach`)."""
+        ctx = self.ctx
+        mover = ctx.mover(pair)
+        dock = ctx.pairs.docking.get(pair.key)
+        if pair.type != pr.ANCHOR or mover is None or dock is None or dock.phase != dk.APPROACH:
+            return False
+        return len(ctx.assembly_of(pair.robot_i if mover == "i" else pair.robot_j)) > 1
+
+    def axis_objectives(self, obj, pair, mover, m_robot, mg, hg, poses):
+        """An assembly docking an anchor pair: its mover robot tracks the command of
+        :mod:`puzzlebot_mpc.axis_approach` (along its partner's axis), the rest of it the rigid-body speeds
+        that go with it; the partner's assembly holds still."""
+        ctx, s = self.ctx, self.settings
+        for m in hg:
+            obj.velocity_mask[ctx.index[m]] = self.hold()
+        pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
+        if pi is None or pj is None:
+            return
+        lane = axis_approach.AxisLane(lookahead=s.approach_lookahead, turn_rate=s.assembly_turn_rate)
+        cmd = axis_approach.command(pair, mover, pi, pj, lane, self.axis_phase.get(pair.key, axis_approach.FOLLOW))
+        self.axis_phase[pair.key] = cmd.phase
         self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
         for m in mg:
             obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
@@ -288,7 +331,8 @@ class Couple(Behavior):
         """Keys of the active pairs the docking manoeuvre drives this step (their alignment cost is off)."""
         book = self.ctx.pairs
         knobs = {q.key for q in book.active if q.type == pr.KNOB and self.ctx.mover(q) is not None}
-        return knobs | {k for k, d in book.docking.items() if d.phase in dk.DRIVEN}
+        axis = {q.key for q in book.active if self.on_axis_lane(q)}
+        return knobs | axis | {k for k, d in book.docking.items() if d.phase in dk.DRIVEN}
 
     def display(self, request_id, state):
         """The target's name and its slots as placed (world frame); the MPC aligns pairs, not slot
