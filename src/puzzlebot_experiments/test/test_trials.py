@@ -51,6 +51,16 @@ def test_edge_lock_holds_a_robot_tipped_over_the_edge():
     assert r["front_beyond_edge_mm"] > 5.0 and r["front_pitch_rad"] > 0.2
 
 
+def test_the_gap_trial_splits_the_front_robots_pitch_into_holder_neck_and_opening():
+    # the pair reaches the gap within 2 s; the three parts of the front robot's pitch add up to its pitch
+    # relative to the back robot, which stays level on its stage
+    r = T.gap_pair_trial(0, timeout=3.0)
+    assert r["decoupled_at_s"] is None and r["front_max_pitch_rad"] > 0.1, r
+    parts = r["pitch_in_holder_rad"] + r["pitch_at_neck_rad"] + r["pitch_in_opening_rad"]
+    assert parts == pytest.approx(r["front_max_pitch_rad"] - r["back_pitch_rad"], abs=0.04), r
+    assert abs(r["back_pitch_rad"]) < 0.1, r
+
+
 def test_edge_lock_carries_weights_hung_on_the_robot():
     # the paper's lock holds 500 g; the model's holds 284-539 g over seeds 0-5 (docs/sim.md): at least
     # twice the hanging robot's own weight, and the ramp stops at a separation, not at its cap

@@ -209,10 +209,13 @@ def run_trial(directory, scenario, seed, trial, cfg=None, overrides=None, on_tic
 
 
 class PairTrace:
-    """The timeline of one anchor pair in a trial (an ``on_tick`` for :func:`run_trial`).
+    """The timeline of one pair in a trial (an ``on_tick`` for :func:`run_trial`).
 
     ``anchor_robot``, ``opening_robot``: the pair (the anchor robot's anchor in the
-    opening robot's mouth); ``every`` [s]: one row per this much simulated time
+    opening robot's mouth; for a knob pair the knob robot and the hole robot:
+    then ``gap_mm`` is the knob's distance out from the hole's side, ``lateral_mm``
+    along it from the hole, and ``docking`` "knob lane" while the pair is
+    active); ``every`` [s]: one row per this much simulated time
     (0: every control step). Each row (``rows``, dicts): ``t`` [s] simulated,
     ``step`` (index in the scenario), ``controller`` (the controller's status of
     the pair while it is a goal or coupled; "-" otherwise, e.g. while a decouple
@@ -239,15 +242,22 @@ class PairTrace:
         book, out = cl.loop.pairs, tick.output
         pair = book.find(a, o)
         controller, docking = "-", "-"
-        if pair is not None and pair.type == pr.ANCHOR and pair.robot_i == a:
+        if pair is not None and pair.robot_i == a:
             controller = "coupled" if pair.key in book.coupled else pr.STATUS_NAMES[pair.status]
             d = book.docking.get(pair.key)
             if d is not None:
                 docking = "%s %d %+.1f" % (d.phase, d.attempts, 1e3 * d.aim)
+            elif pair in book.active and pair.type == pr.KNOB:
+                docking = "knob lane"
         else:
             pair = pr.make_pair(a, o, pr.ANCHOR, cl.geometry)
         pa, po = out.poses.get(a), out.poses.get(o)
-        gap, lateral, dtheta = seat_measure(pair, pa, po) if pa is not None and po is not None else (np.nan,) * 3
+        if pa is None or po is None:
+            gap, lateral, dtheta = (np.nan,) * 3
+        elif pair.type == pr.KNOB:
+            gap, lateral, dtheta = pr.knob_measure(pair, pa, po)
+        else:
+            gap, lateral, dtheta = seat_measure(pair, pa, po)
         bullet = cl.physical().get((a, o))
         self.rows.append({"t": round(tick.time, 2), "step": step, "controller": controller, "docking": docking,
                           "bullet": "-" if bullet is None else BULLET_STATUS[bullet],

@@ -204,6 +204,61 @@ def edge_lock_trial(seed, speed=0.05, stage_height=0.05, hold_s=5.0, stop="tip",
                 "head_locked": _head_locked(w, "a", "o", robot, anchor), "status": _status(w, "a", "o")}
 
 
+def _relative_pitch(orn_ref, orn):
+    """Pitch [rad] of a body of orientation ``orn`` in the frame of one of orientation ``orn_ref``
+    (quaternions xyzw, world frame), > 0: its x axis tips down relative to the reference's."""
+    r = np.array(pb.getMatrixFromQuaternion(orn_ref)).reshape(3, 3)
+    b = np.array(pb.getMatrixFromQuaternion(orn)).reshape(3, 3)
+    rel = r.T @ b
+    return math.atan2(-rel[2, 0], rel[0, 0])
+
+
+def gap_pair_trial(seed, speed=0.03, timeout=20.0, sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
+    """A coupled pair drives across the gap world's 40 mm gap (the bridge's crossing, one column of it).
+
+    The mated pair starts 40 mm behind the first stage's edge, both robots
+    driving forwards at ``speed``; ``a`` (anchor robot, in front) goes over
+    the gap first, hanging on its anchor in ``o``'s opening while its wheels
+    are over the gap. Success: within ``timeout`` both robots are on the
+    second stage (centres beyond its edge, level within UPRIGHT_TILT) and the
+    pair never came apart. Reported: the largest nose-down pitch of ``a``
+    [rad] and where it comes from, at that moment: ``a``'s pitch on the
+    anchor's base (the holder's play), the base's on the head (the neck's
+    bending) and the head's in ``o``'s opening (turning in the mouth), each
+    > 0 nose down; their sum is ``a``'s pitch relative to ``o`` (``o``'s own
+    pitch then: ``back_pitch_rad``). Seeded
+    perturbation: the mated start.
+    """
+    rng = np.random.default_rng(seed)
+    wp = WorldParams()
+    far_edge = wp.edge_x + wp.gap_width
+    starts = [replace(s, x=s.x + wp.edge_x - 0.04) for s in _mated_pair(rng, robot)]
+    with _world(starts, sim, robot, anchor, world="gap", world_params=wp) as w:
+        w.run(0.2)
+        for n in ("a", "o"):
+            w.set_command(n, speed, 0.0)
+        worst, decoupled_at, crossed_at = (0.0,) * 5, None, None
+        while w.time < timeout and crossed_at is None:
+            w.run(SCRIPT_DT)
+            if decoupled_at is None and _status(w, "a", "o") == DECOUPLED:
+                decoupled_at = round(w.time, 2)
+            pa = _pitch(w, "a")
+            if pa > worst[0]:
+                base = w.anchor_pose("a")[1]
+                head = pb.getLinkState(w.robots["a"].anchor, 0, physicsClientId=w.client)[1]   # the neck's child
+                worst = (pa, _relative_pitch(base, w.pose("a")[1]), _relative_pitch(head, base),
+                         _relative_pitch(w.pose("o")[1], head), _pitch(w, "o"))
+            if all(w.pose2d(n)[0] > far_edge and abs(_pitch(w, n)) < UPRIGHT_TILT for n in ("a", "o")):
+                crossed_at = round(w.time, 2)
+        return {"trial": "gap", "seed": seed, "success": crossed_at is not None and decoupled_at is None,
+                "time_s": crossed_at, "decoupled_at_s": decoupled_at,
+                "front_max_pitch_rad": round(worst[0], 2), "pitch_in_holder_rad": round(worst[1], 2),
+                "pitch_at_neck_rad": round(worst[2], 2), "pitch_in_opening_rad": round(worst[3], 2),
+                "back_pitch_rad": round(worst[4], 2),
+                "front_x_mm": round(1e3 * (w.pose2d("a")[0] - wp.edge_x), 1),
+                "front_z_mm": round(1e3 * w.pose("a")[0][2], 1)}
+
+
 def lock_load_trial(seed, stage_height=0.15, ramp_n_per_s=0.5, settle_s=2.0, max_load_n=6.0, tip_timeout=10.0,
                     sim=SimParams(), robot=RobotParams(), anchor=AnchorParams()):
     """How much load the edge lock holds (the paper's "holds up to 500 g").
