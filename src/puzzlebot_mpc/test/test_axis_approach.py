@@ -55,3 +55,9 @@ def test_a_mover_close_in_and_off_the_axis_backs_straight_out_then_comes_in():
     (gap, lateral, dtheta), phases = drive("j", start, (0.0, 0.0, 0.0), seconds=60.0)
     assert phases == [aa.BACKOFF, aa.FOLLOW]
     assert gap <= 0.0 and abs(lateral) < 0.001 and abs(dtheta) < 0.05, (gap, lateral, dtheta)
+
+
+def test_a_mover_whose_back_off_is_blocked_follows_the_axis_from_where_it_is():
+    start = (-L - 0.015, 0.004, 0.0)
+    cmd = aa.command(anchor_pair(), "j", (0.0, 0.0, 0.0), start, LANE, aa.BACKOFF, may_back_off=False)
+    assert cmd.phase == aa.FOLLOW and cmd.v > 0.0

@@ -86,30 +86,29 @@ def test_a_mover_already_alongside_the_side_closes_in_without_backing_out_past_t
 def test_a_blocked_back_off_is_given_up_for_a_while_and_one_that_moves_is_not():
     watch = ka.ProgressWatch()
 
-    def at(behind):                                          # on the lane, parallel
-        return (behind, 0.0, 0.0, -1.0)
-    assert watch.advise(ka.BACKOFF, at(0.002), 0.0, LANE) == (True, False)
+    assert watch.advise(ka.BACKOFF, 0.002, 0.0, False) == (True, False)
     for k in range(1, int(round(ka.BACKOFF_STALL / 0.1))):   # backing, but stuck 2 mm behind the hole
-        assert watch.advise(ka.BACKOFF, at(0.0025), 0.1 * k, LANE) == (True, False)
+        assert watch.advise(ka.BACKOFF, 0.0025, 0.1 * k, False) == (True, False)
     t = ka.BACKOFF_STALL + 0.05
-    assert watch.advise(ka.BACKOFF, at(0.0025), t, LANE) == (False, False)   # blocked: follow from here ...
-    assert watch.advise(ka.FOLLOW, at(0.0025), t + ka.BACKOFF_REST - 0.1, LANE)[0] is False
-    assert watch.advise(ka.FOLLOW, at(0.0025), t + ka.BACKOFF_REST + 0.1, LANE)[0] is True   # ... for a while
+    assert watch.advise(ka.BACKOFF, 0.0025, t, False) == (False, False)   # blocked: follow from here ...
+    assert watch.advise(ka.FOLLOW, 0.0025, t + ka.BACKOFF_REST - 0.1, False)[0] is False
+    assert watch.advise(ka.FOLLOW, 0.0025, t + ka.BACKOFF_REST + 0.1, False)[0] is True   # ... for a while
     moving = ka.ProgressWatch()
-    assert all(moving.advise(ka.BACKOFF, at(0.001 * k), 0.1 * k, LANE) == (True, False) for k in range(60))
+    assert all(moving.advise(ka.BACKOFF, 0.001 * k, 0.1 * k, False) == (True, False) for k in range(60))
 
 
 def test_a_mover_that_gets_no_nearer_the_hole_alongside_its_partner_backs_off_and_comes_again():
-    watch, stuck = ka.ProgressWatch(), (0.015, 0.0, 0.0, -1.0)          # 15 mm behind the hole, on the lane
-    n = int(round(ka.FOLLOW_STALL / 0.1))
-    advice = [watch.advise(ka.FOLLOW, stuck, 0.1 * k + 0.01, LANE) for k in range(n + 1)]
+    stuck = (0.015, 0.0, 0.0, -1.0)                          # 15 mm behind the hole, on the lane
+    assert ka.alongside(stuck, LANE)
+    watch, n = ka.ProgressWatch(), int(round(ka.FOLLOW_STALL / 0.1))
+    advice = [watch.advise(ka.FOLLOW, stuck[0], 0.1 * k + 0.01, True) for k in range(n + 1)]
     assert advice[-1] == (True, True) and all(a == (True, False) for a in advice[:-1])
     cmd = ka.command(knob_pair(), "i", (-0.015, -GEO.body_side - LANE.offset(0.015), 0.0), HOLE_ROBOT, LANE,
                      retry=True)
     assert cmd.phase == ka.BACKOFF and cmd.v < 0.0
     # one that comes nearer, or is turning onto its lane far from its partner, is left alone
     closing = ka.ProgressWatch()
-    assert not any(closing.advise(ka.FOLLOW, (0.025 - 0.003 * 0.1 * k, 0.0, 0.0, -1.0), 0.1 * k, LANE)[1]
-                   for k in range(60))
-    turning = ka.ProgressWatch()
-    assert not any(turning.advise(ka.FOLLOW, (0.015, 0.0, 0.8, -1.0), 0.1 * k, LANE)[1] for k in range(60))
+    assert not any(closing.advise(ka.FOLLOW, 0.025 - 0.003 * 0.1 * k, 0.1 * k, True)[1] for k in range(60))
+    assert not ka.alongside((0.015, 0.0, 0.8, -1.0), LANE)                # turning onto its lane
+    assert not ka.alongside((0.04, 0.0, 0.0, -1.0), LANE)                 # before the partner's corner
+    assert not ka.alongside((0.015, 0.005, 0.0, -1.0), LANE)              # off its lane

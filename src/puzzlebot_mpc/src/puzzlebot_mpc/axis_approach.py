@@ -20,7 +20,9 @@ at speed ``s`` (faster far out, ``creep`` close in and on into the mouth,
 where Algorithm 2 and the docking manoeuvre take over as for any pair). A
 mover off the axis by more than ``off_axis`` that is too close to get onto
 it (``|off| / tan(MAX_CUT) + standoff``) backs straight out first, without
-turning, to that run plus ``lookahead``.
+turning, to that run plus ``lookahead``; a back-off that gets nowhere (the
+assembly behind it) is given up for a while, as the knob lane's is
+(puzzlebot_mpc.knob_approach.ProgressWatch).
 """
 
 import math
@@ -70,15 +72,18 @@ def axis_state(pair, mover, pose_i, pose_j):
     return along, off, wrap_angle(heading - math.pi), direction
 
 
-def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW):
+def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True):
     """The mover's command for anchor pair ``pair`` (robot_i the anchor robot, robot_j the opening robot).
 
     ``mover``: "i" or "j"; poses (x, y, theta) [m, rad] in the world;
     ``lane``: :class:`AxisLane`; ``phase``: the phase of the last command (a
-    mover backing out goes on to the end of its run)."""
+    mover backing out goes on to the end of its run); ``may_back_off``:
+    False follows the axis from where the mover is (a back-off found
+    blocked: knob_approach.ProgressWatch)."""
     along, off, psi, direction = axis_state(pair, mover, pose_i, pose_j)
     need = abs(off) / math.tan(MAX_CUT) + lane.standoff
-    if phase == BACKOFF and along < need + lane.lookahead or abs(off) > lane.off_axis and along < need:
+    if may_back_off and (phase == BACKOFF and along < need + lane.lookahead
+                         or abs(off) > lane.off_axis and along < need):
         return AxisCommand(-direction * lane.speed, 0.0, BACKOFF)
     s = max(lane.creep, min(lane.speed, lane.speed_gain * along))
     k = lane.steer_gain

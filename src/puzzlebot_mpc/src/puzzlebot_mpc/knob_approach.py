@@ -125,11 +125,10 @@ class ProgressWatch:
         self.start = None           # (phase, time [s], behind [m]) when the current stretch started
         self.blocked_at = None      # time [s] the last back-off was found blocked
 
-    def advise(self, phase, state, now, lane):
-        """(may back off, back off now) for the mover; ``phase``: its last command's, ``state``: its
-        lane_state (behind [m], off the lane [m], heading difference [rad], side), ``now`` [s], ``lane``: the
-        KnobLane."""
-        behind, off, dtheta, _ = state
+    def advise(self, phase, behind, now, alongside):
+        """(may back off, back off now) for the mover; ``phase``: its last command's, ``behind`` [m]: how far
+        its point is from where it is going (lane_state's, axis_approach's ``along``), ``now`` [s],
+        ``alongside``: it is where a stall while following is a jam (:func:`alongside`; False: never)."""
         if self.start is None or self.start[0] != phase:
             self.start = (phase, now, behind)
         resting = self.blocked_at is not None and now - self.blocked_at < BACKOFF_REST
@@ -141,14 +140,21 @@ class ProgressWatch:
                     return False, False
                 self.start = (phase, now, behind)
             return not resting, False
-        if not (lane.level < behind < lane.standoff and abs(off) <= OFF_LANE and abs(dtheta) <= MAX_CUT):
-            self.start = (phase, now, behind)              # not alongside the side on the lane: no jam
+        if not alongside:
+            self.start = (phase, now, behind)
             return not resting, False
         if now - t0 >= FOLLOW_STALL:
             self.start = (phase, now, behind)
             if b0 - behind < BACKOFF_PROGRESS and not resting:
                 return True, True
         return not resting, False
+
+
+def alongside(state, lane):
+    """True when a mover in lane_state ``state`` runs along its partner's side on its lane, parallel: past
+    the corner (less than ``standoff`` behind the hole), not yet at the hole, within OFF_LANE and MAX_CUT."""
+    behind, off, dtheta, _ = state
+    return lane.level < behind < lane.standoff and abs(off) <= OFF_LANE and abs(dtheta) <= MAX_CUT
 
 
 def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, retry=False):

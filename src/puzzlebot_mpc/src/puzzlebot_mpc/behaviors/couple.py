@@ -104,7 +104,7 @@ class Couple(Behavior):
         self.ctx.pairs.set_goals(a.pairs, a.priority)
         self.ctx.pairs.repair = True
         self.knob_phase = {}             # knob pair key -> the phase of its mover's last command (knob_approach)
-        self.knob_watch = {}             # knob pair key -> its knob_approach.ProgressWatch
+        self.watch = {}                  # knob pair or axis-lane pair key -> its knob_approach.ProgressWatch
         self.axis_phase = {}             # anchor pair key -> the phase of its assembly mover's last command
         return "goal pairs: " + ", ".join("%s->%s" % p.key for p in a.pairs)
 
@@ -196,7 +196,7 @@ class Couple(Behavior):
             dock = book.docking.get(p.key)
             driven = dock is not None and dock.phase in dk.DRIVEN
             if self.on_axis_lane(p):
-                self.axis_objectives(obj, p, mover, m_robot, mg, hg, poses)
+                self.axis_objectives(obj, p, mover, m_robot, mg, hg, poses, now)
                 continue
             seed = len(mg) == len(hg) == 1
             for m in hg:
@@ -239,8 +239,8 @@ class Couple(Behavior):
             lane = replace(lane, turn_rate=min(lane.turn_rate, s.assembly_turn_rate))
         phase = self.knob_phase.get(pair.key, knob_approach.FOLLOW)
         state = knob_approach.lane_state(pair, mover, pi, pj, lane)
-        watch = self.knob_watch.setdefault(pair.key, knob_approach.ProgressWatch())
-        free, retry = watch.advise(phase, state, now, lane)
+        watch = self.watch.setdefault(pair.key, knob_approach.ProgressWatch())
+        free, retry = watch.advise(phase, state[0], now, knob_approach.alongside(state, lane))
         cmd = knob_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free, retry=retry)
         self.knob_phase[pair.key] = cmd.phase
         self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
@@ -256,7 +256,7 @@ class Couple(Behavior):
             return False
         return len(ctx.assembly_of(pair.robot_i if mover == "i" else pair.robot_j)) > 1
 
-    def axis_objectives(self, obj, pair, mover, m_robot, mg, hg, poses):
+    def axis_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
         """An assembly docking an anchor pair: its mover robot tracks the command of
         :mod:`puzzlebot_mpc.axis_approach` (along its partner's axis), the rest of it the rigid-body speeds
         that go with it; the partner's assembly holds still."""
@@ -267,7 +267,10 @@ class Couple(Behavior):
         if pi is None or pj is None:
             return
         lane = axis_approach.AxisLane(lookahead=s.approach_lookahead, turn_rate=s.assembly_turn_rate)
-        cmd = axis_approach.command(pair, mover, pi, pj, lane, self.axis_phase.get(pair.key, axis_approach.FOLLOW))
+        phase = self.axis_phase.get(pair.key, axis_approach.FOLLOW)
+        along = axis_approach.axis_state(pair, mover, pi, pj)[0]
+        free, _ = self.watch.setdefault(pair.key, knob_approach.ProgressWatch()).advise(phase, along, now, False)
+        cmd = axis_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free)
         self.axis_phase[pair.key] = cmd.phase
         self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
         for m in mg:
