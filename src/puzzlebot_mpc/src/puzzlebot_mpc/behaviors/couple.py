@@ -224,28 +224,38 @@ class Couple(Behavior):
                     obj.open_loop[ctx.index[m]] = tuple(float(x) for x in braced[ctx.index[m]])
         self.stage(obj, poses)
 
-    def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
-        """A knob pair's mover robot tracks the command of :mod:`puzzlebot_mpc.knob_approach` (along its
-        partner's side), the rest of its assembly the rigid-body speeds that go with it (turning as their
-        couplings allow, at most assembly_turn_rate); the partner's assembly holds still."""
-        ctx, s = self.ctx, self.settings
+    def mover_tracks(self, obj, pair, m_robot, mg, hg, poses, command_of):
+        """The partner's assembly ``hg`` holds still; the mover robot ``m_robot`` tracks the command
+        ``command_of(pose_i, pose_j)`` gives (``v`` [m/s], ``w`` [rad/s]), the rest of its assembly ``mg`` the
+        rigid-body speeds that go with it (the MPC tracks them; couplings and stage edges still hold)."""
+        ctx = self.ctx
         for m in hg:
             obj.velocity_mask[ctx.index[m]] = self.hold()
         pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
         if pi is None or pj is None:
             return
-        lane = s.knob_lane()
-        if len(mg) > 1:                  # an assembly turns like a train
-            lane = replace(lane, turn_rate=min(lane.turn_rate, s.assembly_turn_rate))
-        phase = self.knob_phase.get(pair.key, knob_approach.FOLLOW)
-        state = knob_approach.lane_state(pair, mover, pi, pj, lane)
-        watch = self.watch.setdefault(pair.key, knob_approach.ProgressWatch())
-        free, retry = watch.advise(phase, state[0], now, knob_approach.alongside(state, lane))
-        cmd = knob_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free, retry=retry)
-        self.knob_phase[pair.key] = cmd.phase
+        cmd = command_of(pi, pj)
         self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
         for m in mg:
             obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
+
+    def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
+        """A knob pair's mover robot follows :mod:`puzzlebot_mpc.knob_approach`'s lane along its partner's
+        side (:meth:`mover_tracks`; an assembly turning at most assembly_turn_rate)."""
+        s = self.settings
+        lane = s.knob_lane()
+        if len(mg) > 1:                  # an assembly turns like a train
+            lane = replace(lane, turn_rate=min(lane.turn_rate, s.assembly_turn_rate))
+
+        def knob_command(pi, pj):
+            phase = self.knob_phase.get(pair.key, knob_approach.FOLLOW)
+            state = knob_approach.lane_state(pair, mover, pi, pj, lane)
+            watch = self.watch.setdefault(pair.key, knob_approach.ProgressWatch())
+            free, retry = watch.advise(phase, state[0], now, knob_approach.alongside(state, lane))
+            cmd = knob_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free, retry=retry)
+            self.knob_phase[pair.key] = cmd.phase
+            return cmd
+        self.mover_tracks(obj, pair, m_robot, mg, hg, poses, knob_command)
 
     def on_axis_lane(self, pair):
         """True for an active anchor pair whose mover is an assembly approaching (:mod:`axis_approach`)."""
@@ -257,24 +267,19 @@ class Couple(Behavior):
         return len(ctx.assembly_of(pair.robot_i if mover == "i" else pair.robot_j)) > 1
 
     def axis_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
-        """An assembly docking an anchor pair: its mover robot tracks the command of
-        :mod:`puzzlebot_mpc.axis_approach` (along its partner's axis), the rest of it the rigid-body speeds
-        that go with it; the partner's assembly holds still."""
-        ctx, s = self.ctx, self.settings
-        for m in hg:
-            obj.velocity_mask[ctx.index[m]] = self.hold()
-        pi, pj = poses.get(pair.robot_i), poses.get(pair.robot_j)
-        if pi is None or pj is None:
-            return
+        """An assembly docking an anchor pair: its mover robot follows :mod:`puzzlebot_mpc.axis_approach`
+        along its partner's axis (:meth:`mover_tracks`)."""
+        s = self.settings
         lane = axis_approach.AxisLane(lookahead=s.approach_lookahead, turn_rate=s.assembly_turn_rate)
-        phase = self.axis_phase.get(pair.key, axis_approach.FOLLOW)
-        along = axis_approach.axis_state(pair, mover, pi, pj)[0]
-        free, _ = self.watch.setdefault(pair.key, knob_approach.ProgressWatch()).advise(phase, along, now, False)
-        cmd = axis_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free)
-        self.axis_phase[pair.key] = cmd.phase
-        self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
-        for m in mg:
-            obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
+
+        def axis_command(pi, pj):
+            phase = self.axis_phase.get(pair.key, axis_approach.FOLLOW)
+            along = axis_approach.axis_state(pair, mover, pi, pj)[0]
+            free, _ = self.watch.setdefault(pair.key, knob_approach.ProgressWatch()).advise(phase, along, now, False)
+            cmd = axis_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free)
+            self.axis_phase[pair.key] = cmd.phase
+            return cmd
+        self.mover_tracks(obj, pair, m_robot, mg, hg, poses, axis_command)
 
     def staging(self, poses):
         """{robot: (x, y) [m, world]}: where the robots that wait for a busy partner stand ready.
