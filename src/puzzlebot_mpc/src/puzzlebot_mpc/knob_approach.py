@@ -108,17 +108,16 @@ def lane_state(pair, mover, pose_i, pose_j, lane):
 
 
 class ProgressWatch:
-    """Watches a knob pair's mover for progress (see the module): one per active pair.
+    """Watches a lane follower's mover for progress (see the module): one per active pair, a knob pair's or
+    an assembly's on its partner's axis (puzzlebot_mpc.axis_approach).
 
     A back-off that has not gained BACKOFF_PROGRESS in BACKOFF_STALL s is
     blocked (a robot behind the mover): the mover does not back off again for
     BACKOFF_REST s and follows the lane from where it is. A mover following
-    the lane that has not come BACKOFF_PROGRESS nearer the hole in
-    FOLLOW_STALL s (not yet at it: more than ``level`` behind) is jammed on
-    its partner's side (pushing along it, it drags its partner round with it
-    by friction) when it is alongside the side (less than ``standoff``
-    behind), on its lane (within OFF_LANE) and parallel (within MAX_CUT): it
-    backs off and comes along the lane again.
+    the lane that has not come BACKOFF_PROGRESS nearer in FOLLOW_STALL s
+    where the caller says a stall is a jam (a knob pair's mover alongside
+    its partner's side, :func:`alongside`: pushing along it, it drags its
+    partner round with it by friction) backs off and comes again.
     """
 
     def __init__(self):
