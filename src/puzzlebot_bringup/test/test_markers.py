@@ -11,6 +11,7 @@ from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import RobotGeometry, transform_point
 from puzzlebot_common.robots import RobotSpec
+from puzzlebot_common.stages import WorldParams, stages
 from puzzlebot_msgs.msg import (BehaviorObjectives, ConnectionPair, PredictedTrajectories,
                                 RobotTrajectory)
 from puzzlebot_bringup.markers import (AnchorShape, MarkerStyle, assemblies, build_markers, placed_slots,
@@ -70,6 +71,18 @@ def test_bodies_anchors_and_labels_in_the_robot_frames():
     sim = by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, anchor_shape=AnchorShape(0.0243, 0.007, 0.65)))["anchors"]
     assert sim[0].header.frame_id == "pz1/anchor" and len(sim[0].points) == 6     # bar + two barbs
     assert sim[0].points[1].x == pytest.approx(-0.0243)
+
+
+def test_the_worlds_stages_are_boxes_up_to_their_tops_in_the_world_frame():
+    w = WorldParams()
+    gap = by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, stages=stages("gap", w)))["stages"]
+    assert len(gap) == 2 and all(m.header.frame_id == "world" and m.type == Marker.CUBE for m in gap)
+    first, second = sorted(gap, key=lambda m: m.pose.position.x)
+    assert first.pose.position.x + first.scale.x / 2 == pytest.approx(w.edge_x)               # the first's edge
+    assert second.pose.position.x - second.scale.x / 2 == pytest.approx(w.edge_x + w.gap_width)  # the gap
+    assert first.scale.z == pytest.approx(w.stage_height) and first.pose.position.z == pytest.approx(w.stage_height / 2)
+    assert first.scale.y == pytest.approx(w.stage_width)
+    assert "stages" not in by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, stages=stages("flat", w)))
 
 
 def test_pairs_polygons_and_physical_state_coloured_by_status():

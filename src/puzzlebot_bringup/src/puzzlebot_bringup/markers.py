@@ -20,6 +20,7 @@ Namespaces (one owner: this module):
 | ``goals`` | go_to_goal goals | world |
 | ``slots`` | target slots of a couple behaviour, placed on the largest coupled assembly | world |
 | ``legend`` | what each colour means, one line per entry in its colour, at the view's top left | ``puzzlebot/view`` |
+| ``stages`` | the world's stages (puzzlebot_common.stages: a step's, a gap's two), boxes up to their tops | world |
 
 Markers in a robot's frame are frame-locked with stamp 0: rviz moves them
 with the latest tf. World-frame markers need the robots' poses
@@ -78,6 +79,7 @@ class MarkerStyle:
     goal_radius: float = 0.008
     slot: Colour = (0.8, 0.7, 1.0, 0.7)
     slot_width: float = 0.0015
+    stage: Colour = (0.75, 0.7, 0.6, 0.35)
     z_lift: float = 0.001
     legend_x: float = -0.19
     legend_y: float = 0.22
@@ -245,8 +247,20 @@ def legend_markers(style, robots, physical=True):
     return out
 
 
+def stage_markers(stage_list, style):
+    """One translucent CUBE per stage (puzzlebot_common.stages.Stage), in the world frame, from the floor
+    up to the stage's top: a step's edge and a gap show where the robots stand."""
+    out = []
+    for k, st in enumerate(stage_list):
+        m = _marker("stages", k, Marker.CUBE, names.WORLD_FRAME, style.stage,
+                    (st.x_max - st.x_min, st.y_max - st.y_min, st.height))
+        m.pose.position = _pt((st.x_min + st.x_max) / 2.0, (st.y_min + st.y_max) / 2.0, st.height / 2.0)
+        out.append(m)
+    return out
+
+
 def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predicted=None, objectives=None,
-                  anchor_shape=None, legend=True):
+                  anchor_shape=None, legend=True, stages=()):
     """The MarkerArray of the current state (see the module docstring).
 
     robots: parsed robot list (RobotSpec: name, pilot); geometry: RobotGeometry;
@@ -256,7 +270,8 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
     PredictedTrajectories or None; objectives: BehaviorObjectives or None;
     anchor_shape: AnchorShape to draw the anchor body in <robot>/anchor (sim), or
     None for the nominal anchor in base_link; legend: add the legend (its physical
-    entries when ``anchor_shape`` is given: the simulation).
+    entries when ``anchor_shape`` is given: the simulation); stages: the world's
+    stages (puzzlebot_common.stages.stages), drawn as boxes.
     """
     out = MarkerArray()
     clear = Marker(action=Marker.DELETEALL)
@@ -266,6 +281,7 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
     top = h + style.z_lift
     L = geometry.body_side
     add = out.markers.append
+    out.markers.extend(stage_markers(stages, style))
     for k, r in enumerate(robots):
         base = names.base_frame(r.name)
         m = _marker("bodies", k, Marker.CUBE, base, style.pilot if r.pilot else style.robot,
