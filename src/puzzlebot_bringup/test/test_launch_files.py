@@ -128,6 +128,19 @@ def test_replay_launch_plays_with_the_runs_robots():
     lab = load_launch("replay", bag="/tmp/run.bag", rviz="false", robots=os.path.join(HERE, "config", "pz3_lab.yaml"))
     assert node_names(lab) == ["markers", "play", "robot_state_publisher"]
     assert [r.ip_octet for r in parse_robot_list(lab.params["/puzzlebot/robots"].value)] == [41, 42, 43]
+    assert lab.params["/markers/world"].value == "flat"
+
+
+def test_the_markers_node_draws_the_world_the_mpc_keeps_the_robots_on():
+    runs = (("sim", {"scenario": "bridge_gap", "markers": "true"}),
+            ("replay", {"bag": "/tmp/run.bag", "scenario": "bridge_gap"}))
+    for launch, args in runs:
+        c = load_launch(launch, **args)
+        assert c.params["/markers/world"].value == "gap", launch
+        assert c.params["/markers/world_params"].value["gap_width"] == pytest.approx(0.04), launch
+        if launch == "sim":
+            assert c.params["/mpc/world"].value == "gap"
+            assert c.params["/mpc/world_params"].value == c.params["/markers/world_params"].value
 
 
 def test_lab_robot_list_and_configs_parse():

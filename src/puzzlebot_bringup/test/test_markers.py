@@ -82,7 +82,10 @@ def test_the_worlds_stages_are_boxes_up_to_their_tops_in_the_world_frame():
     assert second.pose.position.x - second.scale.x / 2 == pytest.approx(w.edge_x + w.gap_width)  # the gap
     assert first.scale.z == pytest.approx(w.stage_height) and first.pose.position.z == pytest.approx(w.stage_height / 2)
     assert first.scale.y == pytest.approx(w.stage_width)
-    assert "stages" not in by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, stages=stages("flat", w)))
+    legend = [m.text for m in by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, stages=stages("gap", w)))["legend"]]
+    assert legend[-1] == "stage"
+    flat = by_ns(build_markers(ROBOTS, GEO, STYLE, POSES, stages=stages("flat", w)))
+    assert "stages" not in flat and "stage" not in [m.text for m in flat["legend"]]
 
 
 def test_pairs_polygons_and_physical_state_coloured_by_status():

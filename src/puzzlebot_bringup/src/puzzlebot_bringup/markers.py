@@ -218,9 +218,10 @@ def view_centre(poses, previous=None, smoothing=0.0):
     return tuple(smoothing * a + (1.0 - smoothing) * b for a, b in zip(previous, centre))
 
 
-def legend_entries(style, robots, physical=True):
+def legend_entries(style, robots, physical=True, stages=False):
     """(text, colour) lines of the legend: bodies, pair statuses, the physical seating (``physical``:
-    the simulation publishes it), anchors, predicted paths, goals and target slots."""
+    the simulation publishes it), anchors, predicted paths, goals, target slots and (``stages``: the
+    world has some) the stages."""
     out = [("robot", style.robot)]
     if any(r.pilot for r in robots):
         out.append(("pilot robot", style.pilot))
@@ -230,14 +231,16 @@ def legend_entries(style, robots, physical=True):
         out += [("anchor seated (Bullet)", style.seated), ("anchor in opening (Bullet)", style.in_opening)]
     out += [("anchor", style.anchor), ("predicted path (MPC)", style.predicted), ("goal", style.goal),
             ("target slot", style.slot)]
+    if stages:
+        out.append(("stage", style.stage))
     return out
 
 
-def legend_markers(style, robots, physical=True):
+def legend_markers(style, robots, physical=True, stages=False):
     """The legend: one TEXT_VIEW_FACING marker per entry, in names.VIEW_FRAME from (legend_x, legend_y)
     downwards (style), each in its colour."""
     out = []
-    for k, (text, colour) in enumerate(legend_entries(style, robots, physical)):
+    for k, (text, colour) in enumerate(legend_entries(style, robots, physical, stages)):
         m = _marker("legend", k, Marker.TEXT_VIEW_FACING, names.VIEW_FRAME, colour, (0, 0, style.legend_height),
                     locked=True)
         m.color = _colour(colour, 1.0)
@@ -377,6 +380,6 @@ def build_markers(robots, geometry, style, poses, pairs=(), physical=(), predict
             m.points += [_pt(x, y, z), _pt(front[0], front[1], z)]
             add(m)
     if legend:
-        out.markers += legend_markers(style, robots, physical=anchor_shape is not None)
+        out.markers += legend_markers(style, robots, physical=anchor_shape is not None, stages=bool(stages))
     return out
 
