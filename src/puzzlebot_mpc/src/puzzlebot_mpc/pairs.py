@@ -680,10 +680,7 @@ class PairBook:
                 self.monitors.pop(key, None)
                 continue
             if head_margin(pair, pi, pj, coupling_polygon(pair, self.geometry)) < -self.lost_margin:
-                del self.coupled[key]
-                self.monitors.pop(key, None)
-                pair.status = DECOUPLED
-                lost.append(pair)
+                self._lose(pair, lost)
             elif self.repair and self.dock_settings is not None and pair.type == ANCHOR:
                 monitor = self.monitors.setdefault(key, SeatMonitor(self.dock_settings))
                 gap, lateral, _ = seat_measure(pair, pi, pj)
@@ -695,10 +692,7 @@ class PairBook:
                     if self.repair:
                         self._reseat_knob(pair, now)
                     else:                        # no couple to close it again: the pair is lost
-                        del self.coupled[key]
-                        self.monitors.pop(key, None)
-                        pair.status = DECOUPLED
-                        lost.append(pair)
+                        self._lose(pair, lost)
         return newly, lost
 
     def _tugged(self):
@@ -733,6 +727,13 @@ class PairBook:
         pair.status, pair.since, pair.confirmed = HEAD_ALIGNED, now, 0
         self.goals.append(pair)
         self.reseats += 1
+
+    def _lose(self, pair, lost):
+        """A coupled pair no longer holds: decoupled, appended to ``lost``."""
+        del self.coupled[pair.key]
+        self.monitors.pop(pair.key, None)
+        pair.status = DECOUPLED
+        lost.append(pair)
 
     def _reseat_knob(self, pair, now):
         """A coupled knob pair found off its hole goes back to the goals: its approach closes it again."""
