@@ -61,3 +61,19 @@ def test_a_mover_whose_back_off_is_blocked_follows_the_axis_from_where_it_is():
     start = (-L - 0.015, 0.004, 0.0)
     cmd = aa.command(anchor_pair(), "j", (0.0, 0.0, 0.0), start, LANE, aa.BACKOFF, may_back_off=False)
     assert cmd.phase == aa.FOLLOW and cmd.v > 0.0
+
+
+def test_an_askew_back_off_ends_at_the_longest_run_instead_of_running_on():
+    """Backing straight out 0.5 rad askew, the mover drifts off the axis faster than its run grows: without
+    the cap (standoff_max) its back-off never ended."""
+    pair, partner = anchor_pair(), (0.0, 0.0, 0.0)
+    pose, phase = (-L - 0.01, 0.004, 0.5), aa.FOLLOW                    # o behind a, askew, near the mouth
+    for k in range(400):
+        cmd = aa.command(pair, "j", partner, pose, LANE, phase)
+        if phase == aa.BACKOFF and cmd.phase == aa.FOLLOW:
+            break
+        phase = cmd.phase
+        for _ in range(10):
+            pose = unicycle_arc(pose, cmd.v, cmd.w, 0.01)
+    along = aa.axis_state(pair, "j", partner, pose)[0]
+    assert k < 399 and along == pytest.approx(LANE.standoff_max + LANE.lookahead, abs=0.003)

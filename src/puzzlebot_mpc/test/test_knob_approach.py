@@ -44,6 +44,24 @@ def test_a_mover_beside_the_hole_but_off_its_lane_backs_straight_out():
     assert cmd.phase == ka.BACKOFF and cmd.v < 0.0 and cmd.w == 0.0
 
 
+def test_a_single_robot_backing_off_askew_turns_to_its_partners_heading_and_then_follows_in():
+    """The run a back-off gives assumes a parallel mover: this one, backing straight (as an assembly does),
+    never gets onto its lane."""
+    askew = (0.0, -GEO.body_side - 0.02, 0.3)
+    assert ka.command(knob_pair(), "i", askew, HOLE_ROBOT, LANE).w == 0.0            # an assembly: straight
+    cmd = ka.command(knob_pair(), "i", askew, HOLE_ROBOT, LANE, turn_back=True)
+    assert cmd.phase == ka.BACKOFF and cmd.v < 0.0 and cmd.w < 0.0                   # towards heading 0
+    pose, phase = askew, ka.FOLLOW
+    for _ in range(400):
+        cmd = ka.command(knob_pair(), "i", pose, HOLE_ROBOT, LANE, phase, turn_back=True)
+        phase = cmd.phase
+        for _ in range(10):
+            pose = unicycle_arc(pose, cmd.v, cmd.w, 0.01)
+    behind, off, dtheta, _ = ka.lane_state(knob_pair(), "i", pose, HOLE_ROBOT, LANE)
+    assert abs(behind) < ka.HOME + 0.0005 and -LANE.press - 0.001 < off + LANE.offset(behind) < 0.001
+    assert abs(dtheta) < GEO.knob_yaw_tolerance and phase == ka.FOLLOW
+
+
 @pytest.mark.parametrize("start", [(-0.12, -GEO.body_side - 0.02, 0.2), (0.0, -GEO.body_side - 0.02, 0.0),
                                    (-0.15, -GEO.body_side - 0.001, -0.1)])
 def test_the_knob_arrives_at_the_hole_pressed_on_the_side_and_parallel(start):
@@ -111,4 +129,5 @@ def test_a_mover_that_gets_no_nearer_the_hole_alongside_its_partner_backs_off_an
     assert not any(closing.advise(ka.FOLLOW, 0.025 - 0.003 * 0.1 * k, 0.1 * k, True)[1] for k in range(60))
     assert not ka.alongside((0.015, 0.0, 0.8, -1.0), LANE)                # turning onto its lane
     assert not ka.alongside((0.04, 0.0, 0.0, -1.0), LANE)                 # before the partner's corner
+    assert ka.alongside((0.0, 0.002, 0.0, -1.0), LANE)                    # at the hole, not seated: jammed too
     assert not ka.alongside((0.015, 0.005, 0.0, -1.0), LANE)              # off its lane

@@ -266,6 +266,67 @@ def test_the_second_anchor_pair_between_two_rows_frees_the_opening_robots_row_to
     assert all(np.all(obj.velocity_mask[k.index[r]]) for r in poses)
 
 
+def test_an_anchor_pair_closing_a_loop_is_coupled_once_its_faces_have_touched_for_the_loop_time():
+    """Nobody can push and pull the second anchor pair between two rows: it is coupled when it has looked
+    seated (faces within dock_loop_gap, head through the opening) for dock_loop_time, even 3 mm off its
+    axis (past Algorithm 2's lining-up tolerance); faces 2 mm apart (a barb on the lip) never are."""
+    settings = MPCSettings()
+    geo = RobotGeometry()
+
+    def closes(gap, lateral, seconds):
+        book = pr.PairBook.from_settings(geo, settings)
+        pair = pr.make_pair("a", "o", pr.ANCHOR, geo)
+        book.set_goals([pair])
+        book.active, book.movers[pair.key] = [pair], None           # a loop closure: both sides hold
+        pair.status = pr.HEAD_ALIGNED
+        poses = {"a": (0.0, 0.0, 0.0), "o": (-geo.body_side - gap, lateral, 0.0)}
+        t = 0.0
+        while t <= seconds:
+            book.update(poses, t)
+            if pair.key in book.coupled:
+                return t
+            t = round(t + 0.1, 6)
+        return None
+
+    assert settings.dock_loop_gap < 0.002 and settings.insert_lateral_tolerance < 0.003
+    t = closes(0.0, 0.003, 3.0)
+    assert t is not None and t >= settings.dock_loop_time
+    assert closes(0.002, 0.003, 5.0) is None
+    assert closes(0.0, 0.009, 5.0) is None                          # the head outside the opening
+
+
+def test_a_knob_mover_with_a_robot_behind_it_stops_and_its_partner_pulls_ahead_instead():
+    """Rows forming in a column of rows (the grid's start): the mover pz2, beside its partner and off its
+    lane, would back off for a run into the robot behind it; it stops clearance short of it and its
+    partner pz1 drives ahead while it has room."""
+    settings = MPCSettings()
+    side, lane, clearance = RobotGeometry().body_side, settings.knob_lane(), settings.backoff_clearance
+
+    def velocities(behind_gap, ahead_gap):
+        """pz2 beside pz1's left side, 25 mm out; pz3 behind pz2 and pz4 ahead of pz1, the gaps [m] between
+        the bodies (pz3's anchor included) along the line of travel."""
+        m = BehaviorManager(["pz1", "pz2", "pz3", "pz4"], settings)
+        geo = m.geometry
+        size = geo.footprint_radius()
+        y = side + 0.025
+        poses = {"pz1": (0.0, 0.0, 0.0), "pz2": (0.0, y, 0.0),
+                 "pz3": (-(side / 2 + geo.anchor_length + size + behind_gap), y, 0.0),
+                 "pz4": (side / 2 + size + ahead_gap, 0.0, 0.0)}
+        m.request(BehaviorRequest("couple", ["pz1", "pz2"], target="row", timeout=60.0), now=0.0, poses=poses)
+        obj = control_step(m, poses, 0.1)[1]
+        (pair,) = m.pairs.active
+        assert pair.type == pr.KNOB and m.pairs.mover(pair) == "j" and pair.robot_j == "pz2"
+        return obj.velocity[m.index["pz2"]], obj.velocity[m.index["pz1"]], obj.velocity_mask[m.index["pz1"]]
+
+    mover, holder, _ = velocities(0.1, 0.1)                              # room behind: the mover backs
+    assert mover[0] == pytest.approx(-lane.speed) and holder[0] == pytest.approx(0.0)
+    mover, holder, mask = velocities(clearance - 0.002, 0.1)        # the robot behind: the partner goes
+    assert tuple(mover) == (0.0, 0.0) and tuple(holder) == pytest.approx((lane.speed, 0.0))
+    assert tuple(mask) == (1.0, 1.0)
+    mover, holder, _ = velocities(clearance - 0.002, clearance - 0.002)   # no room either way
+    assert tuple(mover) == (0.0, 0.0) and holder[0] == pytest.approx(0.0)
+
+
 def test_a_seed_pairs_holder_only_turns_with_another_robot_close_by():
     """The MPC keeps no robots apart: a holder that drove to line up would run into its neighbour."""
     settings = MPCSettings()

@@ -19,8 +19,10 @@ heading error (0: moving straight at the holding point)::
 at speed ``s`` (faster far out, ``creep`` close in and on into the mouth,
 where Algorithm 2 and the docking manoeuvre take over as for any pair). A
 mover off the axis by more than ``off_axis`` that is too close to get onto
-it (``|off| / tan(MAX_CUT) + standoff``) backs straight out first, without
-turning, to that run plus ``lookahead``; a back-off that gets nowhere (the
+it (``|off| / tan(MAX_CUT) + standoff``, at most ``standoff_max``: an
+askew mover drifts off the axis as it backs, and without the cap its run
+grew faster than it backed) backs straight out first, without turning, to
+that run plus ``lookahead``; a back-off that gets nowhere (the
 assembly behind it) is given up for a while, as the knob lane's is
 (puzzlebot_mpc.knob_approach.ProgressWatch).
 """
@@ -46,6 +48,7 @@ class AxisLane:
     cut_distance: float = 0.008    # m: the offset is cut at 1 rad per this much of it (its e-folding run) ...
     steer_gain: float = 250.0      # 1/m: ... and the heading follows at this gain per metre travelled
     turn_rate: float = 0.15        # rad/s: largest turn rate (an assembly turns like a train)
+    standoff_max: float = 0.15     # longest run a mover off the axis backs off for
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,7 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True):
     False follows the axis from where the mover is (a back-off found
     blocked: knob_approach.ProgressWatch)."""
     along, off, psi, direction = axis_state(pair, mover, pose_i, pose_j)
-    need = abs(off) / math.tan(MAX_CUT) + lane.standoff
+    need = min(lane.standoff_max, abs(off) / math.tan(MAX_CUT) + lane.standoff)
     if may_back_off and (phase == BACKOFF and along < need + lane.lookahead
                          or abs(off) > lane.off_axis and along < need):
         return AxisCommand(-direction * lane.speed, 0.0, BACKOFF)

@@ -154,6 +154,9 @@ class DockingSettings:
     #                                   the lips)
     repair_gap: float = 0.003         # m: a coupled pair with its faces this far apart ...
     repair_time: float = 1.0          # s: ... for this long is re-seated
+    loop_gap: float = 0.001           # m: an anchor pair closing a loop (no mover to push and pull it) is
+    #                                   seated with its faces this close, the head through the opening ...
+    loop_time: float = 1.0            # s: ... for this long
 
     def check(self, where="mpc"):
         from puzzlebot_common.errors import ConfigError

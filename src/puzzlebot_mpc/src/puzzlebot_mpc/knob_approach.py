@@ -23,9 +23,15 @@ assembly the rigid-body speeds that go with it (Couple.knob_objectives):
   |e| / tan(MAX_CUT) + run)`` behind the hole, ``e`` its offset from the
   lane; ``run`` is ``standoff``, or only ``level`` for a point already
   alongside the partner's side, less than ``standoff`` behind the hole,
-  with no corner left to pass) backs straight out, without turning (a
-  chain that reverses while it turns jack-knifes), to ``need + lookahead``
-  behind. A back-off that gets nowhere (blocked by a robot behind the
+  with no corner left to pass) backs out to ``need + lookahead`` behind: an
+  assembly straight, without turning (a chain that reverses while it turns
+  jack-knifes), a single robot turning to its partner's heading (the run
+  assumes a parallel mover: one that came out askew cuts in too late and
+  backs off again and again). Where a robot stands behind the mover (``clearance`` short of
+  it, :func:`clear_run`) the mover stops and its partner's assembly drives
+  straight ahead instead, as far as it has room (Couple.knob_objectives): a
+  row forming in a column of rows backs into the row behind it otherwise,
+  its anchor into that row's mouth. A back-off that gets nowhere (blocked by a robot behind the
   mover) is given up for a while and the mover follows the lane from where
   it is; a mover that gets no nearer the hole along the lane (jammed on
   its partner's side) backs off and comes again (:class:`ProgressWatch`);
@@ -151,12 +157,13 @@ class ProgressWatch:
 
 def alongside(state, lane):
     """True when a mover in lane_state ``state`` runs along its partner's side on its lane, parallel: past
-    the corner (less than ``standoff`` behind the hole), not yet at the hole, within OFF_LANE and MAX_CUT."""
+    the corner (less than ``standoff`` behind the hole) and up to the hole (a knob that stops there
+    without seating, caught on the hole's edge, is jammed too), within OFF_LANE and MAX_CUT."""
     behind, off, dtheta, _ = state
-    return lane.level < behind < lane.standoff and abs(off) <= OFF_LANE and abs(dtheta) <= MAX_CUT
+    return -HOME < behind < lane.standoff and abs(off) <= OFF_LANE and abs(dtheta) <= MAX_CUT
 
 
-def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, retry=False):
+def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, retry=False, turn_back=False):
     """The mover's command for knob pair ``pair`` (robot_i the knob robot, robot_j the hole robot).
 
     ``mover``: "i" or "j"; ``pose_i``, ``pose_j``: (x, y, theta) [m, rad] in
@@ -164,7 +171,8 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, 
     command (a mover backing out goes on to the end of its run);
     ``may_back_off``: False follows the lane from where the mover is;
     ``retry``: back off now, to come along the lane again (both from
-    :class:`ProgressWatch`). The line
+    :class:`ProgressWatch`); ``turn_back``: the mover turns to its partner's heading while it backs off
+    (a single robot; an assembly backs straight, see the module). The line
     follower steers the heading difference ``a`` to the lane's own heading
     ``a_lane`` less a cut towards the lane, proportional to the offset ``e``
     from it (along the holder's +y)::
@@ -178,7 +186,8 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, 
     need = min(lane.standoff_max, abs(off) / math.tan(MAX_CUT) + run)
     if may_back_off and (retry or phase == BACKOFF and behind < need + lane.lookahead
                          or abs(off) > OFF_LANE and behind < need):
-        return KnobCommand(-lane.speed, 0.0, BACKOFF)
+        w = -lane.speed * lane.steer_gain * math.sin(dtheta) if turn_back else 0.0
+        return KnobCommand(-lane.speed, max(-lane.turn_rate, min(lane.turn_rate, w)), BACKOFF)
     v = max(-0.5 * lane.speed, min(lane.speed, lane.speed_gain * behind))
     if behind > HOME:                                  # at least a creep up to the hole
         v = max(v, lane.creep)

@@ -403,6 +403,8 @@ class PairBook:
     first: int = ANCHOR                  # the pair type a target forms first (ANCHOR: chains, then knob pairs
                                          # join them side by side; KNOB: rows, then anchor pairs join them)
     reseats: int = 0                     # pairs sent back to be re-seated so far
+    loop_seated: Dict[Tuple[str, str], float] = field(default_factory=dict)  # loop-closing anchor pair -> time
+                                         # [s] since which it has looked seated (_loop_closed)
 
     @classmethod
     def from_settings(cls, geometry, settings):
@@ -442,6 +444,7 @@ class PairBook:
 
     def clear_goals(self):
         self.goals, self.active, self.priority, self.movers, self.docking = [], [], None, {}, {}
+        self.loop_seated.clear()
         self.repair = False
 
     def remove_coupled(self, key):
@@ -652,6 +655,11 @@ class PairBook:
                 elif status == HEAD_INSERTED and self.dock_settings.pull_test:
                     dock.start_pull(gap, now)
                     status = HEAD_ALIGNED
+            elif dock is None:
+                if status != HEAD_ALIGNED:
+                    self.loop_seated.pop(pair.key, None)
+                elif self._loop_closed(pair, pi, pj, now):
+                    status = HEAD_INSERTED
             elif dock is not None:
                 gap, lateral, dtheta = seat_measure(pair, pi, pj)
                 before = dock.phase
@@ -694,6 +702,25 @@ class PairBook:
                     else:                        # no couple to close it again: the pair is lost
                         self._lose(pair, lost)
         return newly, lost
+
+    def _loop_closed(self, pair, pose_i, pose_j, now):
+        """True when an anchor pair that closes a loop (no mover: both sides hold, the docking manoeuvre
+        cannot push and pull it) has looked seated for ``loop_time``: its faces within ``loop_gap`` and its
+        head through the opening. Algorithm 2's lining-up test does not hold there: the rows' knob pairs
+        leave the second anchor pair between two rows a few mm off its axis, seated in the opening's
+        play (docs/mpc.md, "Seating")."""
+        if self.dock_settings is None or pair.type != ANCHOR or self.movers.get(pair.key, "j") is not None \
+                or now is None:
+            return False
+        gap = seat_measure(pair, pose_i, pose_j)[0]
+        if gap > self.dock_settings.loop_gap or not through_opening(pair, pose_i, pose_j, self.geometry, self.eps):
+            self.loop_seated.pop(pair.key, None)
+            return False
+        since = self.loop_seated.setdefault(pair.key, now)
+        if now - since < self.dock_settings.loop_time - 1e-9:
+            return False
+        del self.loop_seated[pair.key]
+        return True
 
     def _tugged(self):
         """Robots of the assemblies on which a docking manoeuvre pushes or pulls right now."""

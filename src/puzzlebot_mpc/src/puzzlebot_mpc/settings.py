@@ -92,6 +92,9 @@ class MPCSettings:
     knob_steer_gain: float = _KNOB.steer_gain    # 1/m: ... following the lane with this gain ...
     knob_turn_rate: float = _KNOB.turn_rate  # rad/s: ... turning at most this fast (an assembly: at most
                                      # assembly_turn_rate)
+    backoff_clearance: float = 0.01  # m: a knob pair's mover backing off stops this far short of a robot in its
+                                     # way; its partner then pulls away from it while this much is clear on its
+                                     # side (behaviors/couple.py, Couple.make_room)
     knob_seat_tolerance: float = 0.001   # m: a knob pair is coupled when the knob point is this close to the
                                      # hole point (along the side and across it; the hole's play is
                                      # 0.5 mm) for insert_confirm_steps steps; while a couple runs, a
@@ -175,6 +178,9 @@ class MPCSettings:
     dock_brace_gap: float = _DOCK.brace_gap       # m: ... until the faces are this close
     dock_repair_gap: float = _DOCK.repair_gap     # m: a coupled pair with its faces this far apart ...
     dock_repair_time: float = _DOCK.repair_time   # s: ... for this long is re-seated (while a couple runs)
+    dock_loop_gap: float = _DOCK.loop_gap         # m: an anchor pair closing a loop is seated with its faces this
+                                                  # close, its head through the opening ...
+    dock_loop_time: float = _DOCK.loop_time       # s: ... for this long
 
     def docking_settings(self):
         """The docking manoeuvre's settings (puzzlebot_mpc.docking.DockingSettings), None when ``docking``
@@ -224,7 +230,7 @@ class MPCSettings:
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",
                     "approach_lookahead", "approach_standoff_max", "approach_gain_angle", "approach_gain_lateral",
                     "seed_holder_clearance", "stage_standoff", "knob_standoff_max", "knob_lane_gap",
-                    "knob_press", "knob_level", "knob_seat_tolerance"):
+                    "knob_press", "knob_level", "knob_seat_tolerance", "backoff_clearance"):
             if getattr(self, key) < 0:
                 raise ConfigError("%s.%s: must be >= 0" % (where, key))
         if self.constraint_horizon > self.horizon:

@@ -28,6 +28,7 @@ from puzzlebot_common.geometry import transform_point
 from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc import axis_approach, knob_approach
 from puzzlebot_mpc import pairs as pr
+from puzzlebot_mpc.room import assembly_room
 from puzzlebot_mpc.behaviors.base import FAILED, SUCCEEDED, Behavior, BehaviorError, Progress, finite
 from puzzlebot_mpc.targets import TargetError, assign, merge_assignments, resolve_target
 
@@ -227,7 +228,9 @@ class Couple(Behavior):
     def mover_tracks(self, obj, pair, m_robot, mg, hg, poses, command_of):
         """The partner's assembly ``hg`` holds still; the mover robot ``m_robot`` tracks the command
         ``command_of(pose_i, pose_j)`` gives (``v`` [m/s], ``w`` [rad/s]), the rest of its assembly ``mg`` the
-        rigid-body speeds that go with it (the MPC tracks them; couplings and stage edges still hold)."""
+        rigid-body speeds that go with it (the MPC tracks them; couplings and stage edges still hold). A knob
+        mover's back-off with a robot in its way makes room instead (:meth:`make_room`; an assembly backing
+        off its partner's axis that did so joined less often: docs/mpc.md)."""
         ctx = self.ctx
         for m in hg:
             obj.velocity_mask[ctx.index[m]] = self.hold()
@@ -238,6 +241,9 @@ class Couple(Behavior):
         self.rigid_velocities(obj.velocity, m_robot, cmd.v, cmd.w, mg, poses)
         for m in mg:
             obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
+        if cmd.phase == knob_approach.BACKOFF and pair.type == pr.KNOB:
+            h_robot = pair.robot_j if m_robot == pair.robot_i else pair.robot_i
+            self.make_room(obj, h_robot, mg, hg, poses, forwards=cmd.v > 0.0, speed=abs(cmd.v))
 
     def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
         """A knob pair's mover robot follows :mod:`puzzlebot_mpc.knob_approach`'s lane along its partner's
@@ -252,10 +258,39 @@ class Couple(Behavior):
             state = knob_approach.lane_state(pair, mover, pi, pj, lane)
             watch = self.watch.setdefault(pair.key, knob_approach.ProgressWatch())
             free, retry = watch.advise(phase, state[0], now, knob_approach.alongside(state, lane))
-            cmd = knob_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free, retry=retry)
+            cmd = knob_approach.command(pair, mover, pi, pj, lane, phase, may_back_off=free, retry=retry,
+                                        turn_back=self.rigid(m_robot, mg))
             self.knob_phase[pair.key] = cmd.phase
             return cmd
         self.mover_tracks(obj, pair, m_robot, mg, hg, poses, knob_command)
+
+    def make_room(self, obj, h_robot, mg, hg, poses, forwards, speed):
+        """A mover's assembly ``mg`` backing off (``forwards``: its back-off drives forwards, an anchor robot
+        that backs onto its partner; otherwise backwards) with another robot ``backoff_clearance`` [m] or
+        nearer in its way stops; its partner's assembly ``hg`` drives straight away from it instead
+        (rigid-body speeds of ``speed`` [m/s] at ``h_robot``) while it has that much room on its side
+        (room.assembly_room)."""
+        geo, index, clearance = self.ctx.geometry, self.ctx.index, self.settings.backoff_clearance
+        exclude = set(mg) | set(hg)
+
+        def room(members, ahead):
+            return assembly_room(poses, members, ahead, geo, exclude)
+
+        if room(mg, ahead=forwards) > clearance:
+            return
+        for m in mg:
+            obj.velocity[index[m]] = (0.0, 0.0)
+            obj.velocity_mask[index[m]] = (1.0, 1.0)
+        if room(hg, ahead=not forwards) > clearance:
+            self.rigid_velocities(obj.velocity, h_robot, -speed if forwards else speed, 0.0, hg, poses)
+            for m in hg:
+                obj.velocity_mask[index[m]] = (1.0, 1.0) if m == h_robot else (1.0, 0.0)
+
+    def rigid(self, robot, members):
+        """True when the assembly ``members`` of ``robot`` is one rigid body: a single robot, or a row (its
+        robots side by side on knob pairs, no anchor pair among them). It may turn while it backs off; a
+        chain that does jack-knifes."""
+        return set(self.ctx.pairs.row_of(robot)) == set(members)
 
     def on_axis_lane(self, pair):
         """True for an active anchor pair whose mover is an assembly approaching (:mod:`axis_approach`)."""
