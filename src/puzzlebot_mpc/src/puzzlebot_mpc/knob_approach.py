@@ -24,17 +24,19 @@ assembly the rigid-body speeds that go with it (Couple.knob_objectives):
   lane; ``run`` is ``standoff``, or only ``level`` for a point already
   alongside the partner's side, less than ``standoff`` behind the hole,
   with no corner left to pass) backs out to ``need + lookahead`` behind: an
-  assembly straight, without turning (a chain that reverses while it turns
-  jack-knifes), a single robot turning to its partner's heading (the run
-  assumes a parallel mover: one that came out askew cuts in too late and
-  backs off again and again). Where a robot stands behind the mover (``clearance`` short of
-  it, :func:`clear_run`) the mover stops and its partner's assembly drives
-  straight ahead instead, as far as it has room (Couple.knob_objectives): a
-  row forming in a column of rows backs into the row behind it otherwise,
-  its anchor into that row's mouth. A back-off that gets nowhere (blocked by a robot behind the
+  chain straight, without turning (a chain that reverses while it turns
+  jack-knifes), a single robot or a row turning to its partner's heading
+  (the run assumes a parallel mover: one that came out askew cuts in too
+  late and backs off again and again). Where a robot stands behind the
+  mover (``backoff_clearance`` short of it, puzzlebot_mpc.room) the mover
+  stops and its partner's assembly drives straight ahead instead, as far
+  as it has room (Couple.make_room): a row forming in a column of rows
+  backs into the row behind it otherwise, its anchor into that row's
+  mouth. A back-off that gets nowhere (blocked by a robot behind the
   mover) is given up for a while and the mover follows the lane from where
   it is; a mover that gets no nearer the hole along the lane (jammed on
-  its partner's side) backs off and comes again (:class:`ProgressWatch`);
+  its partner's side, or caught on the hole's edge) backs off and comes
+  again (:class:`ProgressWatch`);
 - *follow*: a line follower on the lane (offset and heading fed back,
   ``steer_gain``) at up to ``speed``, slowing to the hole at ``speed_gain``
   per metre left but at least ``creep``, turning at most ``turn_rate``; a
@@ -171,8 +173,9 @@ def command(pair, mover, pose_i, pose_j, lane, phase=FOLLOW, may_back_off=True, 
     command (a mover backing out goes on to the end of its run);
     ``may_back_off``: False follows the lane from where the mover is;
     ``retry``: back off now, to come along the lane again (both from
-    :class:`ProgressWatch`); ``turn_back``: the mover turns to its partner's heading while it backs off
-    (a single robot; an assembly backs straight, see the module). The line
+    :class:`ProgressWatch`); ``turn_back``: the mover turns to its partner's
+    heading while it backs off (a single robot or a row; a chain backs
+    straight, see the module). The line
     follower steers the heading difference ``a`` to the lane's own heading
     ``a_lane`` less a cut towards the lane, proportional to the offset ``e``
     from it (along the holder's +y)::

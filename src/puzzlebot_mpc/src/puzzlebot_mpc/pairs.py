@@ -660,7 +660,7 @@ class PairBook:
                     self.loop_seated.pop(pair.key, None)
                 elif self._loop_closed(pair, pi, pj, now):
                     status = HEAD_INSERTED
-            elif dock is not None:
+            else:
                 gap, lateral, dtheta = seat_measure(pair, pi, pj)
                 before = dock.phase
                 seated = dock.update(gap, lateral, dtheta, now)

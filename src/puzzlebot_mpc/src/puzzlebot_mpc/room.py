@@ -1,6 +1,6 @@
 """Room to back off: how far a robot or an assembly can drive straight ahead or back before it comes to
-another robot (the poses' robots; the MPC keeps no robots apart, so the lane followers that back off
-check, behaviors/couple.py and pairs.PairBook)."""
+another robot (the poses' robots). The MPC keeps no robots apart, so a knob pair's mover that backs off
+checks (behaviors/couple.py, Couple.make_room)."""
 
 import math
 

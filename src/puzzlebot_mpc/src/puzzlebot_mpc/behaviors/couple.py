@@ -243,7 +243,7 @@ class Couple(Behavior):
             obj.velocity_mask[ctx.index[m]] = (1.0, 1.0) if m == m_robot else (1.0, 0.0)
         if cmd.phase == knob_approach.BACKOFF and pair.type == pr.KNOB:
             h_robot = pair.robot_j if m_robot == pair.robot_i else pair.robot_i
-            self.make_room(obj, h_robot, mg, hg, poses, forwards=cmd.v > 0.0, speed=abs(cmd.v))
+            self.make_room(obj, h_robot, mg, hg, poses, speed=abs(cmd.v))
 
     def knob_objectives(self, obj, pair, mover, m_robot, mg, hg, poses, now):
         """A knob pair's mover robot follows :mod:`puzzlebot_mpc.knob_approach`'s lane along its partner's
@@ -264,25 +264,19 @@ class Couple(Behavior):
             return cmd
         self.mover_tracks(obj, pair, m_robot, mg, hg, poses, knob_command)
 
-    def make_room(self, obj, h_robot, mg, hg, poses, forwards, speed):
-        """A mover's assembly ``mg`` backing off (``forwards``: its back-off drives forwards, an anchor robot
-        that backs onto its partner; otherwise backwards) with another robot ``backoff_clearance`` [m] or
-        nearer in its way stops; its partner's assembly ``hg`` drives straight away from it instead
-        (rigid-body speeds of ``speed`` [m/s] at ``h_robot``) while it has that much room on its side
-        (room.assembly_room)."""
+    def make_room(self, obj, h_robot, mg, hg, poses, speed):
+        """A knob mover's assembly ``mg`` backing off with another robot ``backoff_clearance`` [m] or nearer
+        behind it stops; its partner's assembly ``hg`` drives straight ahead instead (rigid-body speeds of
+        ``speed`` [m/s] at ``h_robot``) while it has that much room in front (room.assembly_room)."""
         geo, index, clearance = self.ctx.geometry, self.ctx.index, self.settings.backoff_clearance
         exclude = set(mg) | set(hg)
-
-        def room(members, ahead):
-            return assembly_room(poses, members, ahead, geo, exclude)
-
-        if room(mg, ahead=forwards) > clearance:
+        if assembly_room(poses, mg, False, geo, exclude) > clearance:
             return
         for m in mg:
             obj.velocity[index[m]] = (0.0, 0.0)
             obj.velocity_mask[index[m]] = (1.0, 1.0)
-        if room(hg, ahead=not forwards) > clearance:
-            self.rigid_velocities(obj.velocity, h_robot, -speed if forwards else speed, 0.0, hg, poses)
+        if assembly_room(poses, hg, True, geo, exclude) > clearance:
+            self.rigid_velocities(obj.velocity, h_robot, speed, 0.0, hg, poses)
             for m in hg:
                 obj.velocity_mask[index[m]] = (1.0, 1.0) if m == h_robot else (1.0, 0.0)
 
