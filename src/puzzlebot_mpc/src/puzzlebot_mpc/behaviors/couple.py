@@ -230,7 +230,7 @@ class Couple(Behavior):
         ``command_of(pose_i, pose_j)`` gives (``v`` [m/s], ``w`` [rad/s]), the rest of its assembly ``mg`` the
         rigid-body speeds that go with it (the MPC tracks them; couplings and stage edges still hold). A knob
         mover's back-off with a robot in its way makes room instead (:meth:`make_room`; an assembly backing
-        off its partner's axis that did so joined less often: docs/mpc.md)."""
+        off its partner's axis does not: measured, it joined less often, docs/mpc.md)."""
         ctx = self.ctx
         for m in hg:
             obj.velocity_mask[ctx.index[m]] = self.hold()
