@@ -155,6 +155,20 @@ def test_during_a_nudge_the_anchor_robots_assembly_braces(brace):
             assert m.index[r] not in obj.open_loop
 
 
+def wait_for_the_seat_monitor(m, poses, pair):
+    """Steps manager ``m`` (a couple running, ``pair`` coupled but open in ``poses``) every 0.1 s from 0.1 s:
+    the couple waits for the pair to close until the seat monitor takes it out of the coupled pairs (open
+    for dock_repair_time). Returns k, the next step's index (its time 0.1 k s)."""
+    status = control_step(m, poses, 0.1)[0]
+    assert status.state == RUNNING and "waiting for %s-%s to close" % pair.key in status.message
+    k = 2
+    while pair.key in m.pairs.coupled:
+        status = control_step(m, poses, 0.1 * k)[0]
+        assert status.state == RUNNING and k < 30
+        k += 1
+    return k
+
+
 def test_a_couple_does_not_succeed_while_a_coupled_pair_is_open_and_the_monitor_reseats_it():
     """Every goal pair coupled, but pz1-pz2's faces 5 mm apart (a barb on the lip, pulled open by a robot
     docking elsewhere): the couple runs on, the seat monitor sends the pair back to be pushed home, and the
@@ -170,13 +184,7 @@ def test_a_couple_does_not_succeed_while_a_coupled_pair_is_open_and_the_monitor_
     def step(now):
         return control_step(m, poses, now)[0]
 
-    status = step(0.1)
-    assert status.state == RUNNING and "waiting for pz1-pz2 to close" in status.message
-    k = 2
-    while pair.key in m.pairs.coupled:                                 # the monitor: open for dock_repair_time
-        status = step(0.1 * k)
-        assert status.state == RUNNING and k < 30
-        k += 1
+    k = wait_for_the_seat_monitor(m, poses, pair)
     assert m.pairs.docking[pair.key].phase == "push" and m.pairs.goals == [pair]
     poses["pz1"] = (side, 0.0, 0.0)                                    # pushed home
     for _ in range(settings.dock_home_steps + 2):
@@ -203,13 +211,7 @@ def test_a_knob_pair_pushed_off_its_hole_goes_back_to_the_goals_and_the_couple_w
     def step(now):
         return control_step(m, poses, now)[0]
 
-    status = step(0.1)
-    assert status.state == RUNNING and "waiting for k1-k2 to close" in status.message
-    k = 2
-    while pair.key in m.pairs.coupled:                                 # the monitor: open for dock_repair_time
-        status = step(0.1 * k)
-        assert status.state == RUNNING and k < 30
-        k += 1
+    k = wait_for_the_seat_monitor(m, poses, pair)
     assert k * 0.1 >= settings.dock_repair_time
     assert m.pairs.goals == [pair] and pair.status == pr.DECOUPLED and m.pairs.reseats == 1
     poses["k1"] = (0.0, -side - 0.5 * settings.knob_seat_tolerance, 0.0)    # back in, within the tolerance
