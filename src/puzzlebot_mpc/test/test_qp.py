@@ -10,6 +10,7 @@ import scipy.sparse as sp
 from puzzlebot_common.geometry import RobotGeometry
 from puzzlebot_common.model import NX, unicycle_arc
 from puzzlebot_mpc import controller
+from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.controller import MultiRobotMPC, Objectives, PairObjective, components
 from puzzlebot_mpc.ocp import Problem, Structure, param_vector
 from puzzlebot_mpc.qp import QPStructure, pack
@@ -277,3 +278,31 @@ def test_a_coupled_pair_whose_headings_straddle_pi_is_not_twisted_back_by_a_turn
     assert second.success
     assert second.extra["max_pip_slack"] < 1e-4
     assert np.abs(second.commands[:, 1]).max() < 0.2 * s.w_max
+
+
+@pytest.mark.parametrize("gently", [False, True])
+def test_a_coupled_knob_pair_open_within_its_play_is_pulled_in_gently(gently):
+    """Two robots side by side, their sides 1.5 mm apart (the knob inside the 2 mm knob region), run in
+    closed loop on the kinematic model for 2 s. Tightened by the whole pip_margin (1 mm) the region
+    excludes the knob; the robots cannot move it sideways within a step, and the exact penalty has the
+    MPC turn them at full rate. With the margin pairs.constraint_margin gives (the knob asked
+    knob_hold_step further in per step, as the manager sets it for coupled knob pairs) they turn at a
+    fraction of that, and the gap still closes to within the tightened region."""
+    s = MPCSettings(horizon=10, constraint_horizon=3)
+    x = np.zeros((2, NX))
+    x[1, :3] = (0.0, GEO.body_side + 0.0015, 0.0)       # robot 0's knob in robot 1's hole, 1.5 mm out
+    pair = pr.make_pair("a", "b", pr.KNOB, GEO)
+    mpc, obj, w_peak = MultiRobotMPC(s, 2).setup(), Objectives.stop_all(2), 0.0
+    for _ in range(20):
+        margin = pr.constraint_margin(pair, x[0, :3], x[1, :3], GEO, s.knob_hold, s.knob_hold_step) \
+            if gently else None
+        obj.pairs = [replace(knob_pair(0, 1, coupled=True), margin=margin)]
+        res = mpc.make_step(x, obj)
+        assert res.success
+        w_peak = max(w_peak, float(np.abs(res.commands[:, 1]).max()))
+        x = res.predicted[:, 1].copy()                  # the plant does what the model predicts
+    gap = pr.knob_measure(pair, x[0, :3], x[1, :3])[0]
+    if gently:
+        assert w_peak < 0.25 * s.w_max and gap < s.knob_hold + 1e-4
+    else:
+        assert w_peak > 0.3 * s.w_max

@@ -448,3 +448,20 @@ def test_a_partner_with_an_assembly_behind_it_is_not_turned_in_place():
     for k in range(10):
         obj = m.objectives(now=0.1 * k, poses=poses)
         assert 0 in obj.open_loop and 1 not in obj.open_loop
+
+
+def test_a_coupled_knob_pairs_constraint_is_tightened_from_where_its_knob_is():
+    """The manager hands the MPC a coupled knob pair 1.5 mm open with its region tightened only to
+    knob_hold_step further in (pairs.constraint_margin); a coupled anchor pair keeps pip_margin (None)."""
+    settings = MPCSettings()
+    m = BehaviorManager(["k1", "k2", "a"], settings)
+    side = m.geometry.body_side
+    knob, anchor = pr.make_pair("k1", "k2", pr.KNOB, m.geometry), pr.make_pair("a", "k2", pr.ANCHOR, m.geometry)
+    m.pairs.add_coupled(knob)
+    m.pairs.add_coupled(anchor)
+    poses = {"k1": (0.0, -side - 0.0015, 0.0), "k2": (0.0, 0.0, 0.0), "a": (side, 0.0, 0.0)}
+    margins = {(o.i, o.j): o.margin for o in m.objectives(0.0, poses).pairs}
+    inside = m.geometry.knob_tolerance - 0.0015
+    assert margins[(0, 1)] == pytest.approx(inside + settings.knob_hold_step, abs=1e-4)
+    assert margins[(0, 1)] < m.geometry.knob_tolerance - settings.knob_hold
+    assert margins[(2, 1)] is None

@@ -80,6 +80,7 @@ class PairObjective:
     head: Optional[np.ndarray] = None
     polygon: Optional[np.ndarray] = None
     yaw_limit: float = math.pi          # |relative heading| allowed while coupled [rad]
+    margin: Optional[float] = None      # m the polygon is tightened by in the constraint (None: pip_margin)
 
 
 @dataclass

@@ -178,7 +178,7 @@ def pack(settings, x0, objectives, pairs):
         if pr.coupled and (pr.polygon is None or pr.head is None):
             raise ValueError("coupled pair %d->%d needs a head point and a polygon" % (pr.i, pr.j))
         if pr.polygon is not None:
-            g[q], hh[q] = _halfplanes(pr.polygon, settings.pip_margin)
+            g[q], hh[q] = _halfplanes(pr.polygon, settings.pip_margin if pr.margin is None else pr.margin)
         if pr.head is not None:
             heads[q] = pr.head
     ii = np.array([pr.i for pr in pairs], dtype=int)

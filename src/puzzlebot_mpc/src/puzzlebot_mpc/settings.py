@@ -51,6 +51,10 @@ class MPCSettings:
     w_slack_butterfly: float = 1.0e5  # s/rad: exact-penalty weight of a butterfly-set violation
     slack_regularisation: float = 1.0e-2  # small quadratic weight on slacks (strictly convex QP)
     pip_margin: float = 0.001        # m: coupling polygons are tightened by this much in the constraint
+    knob_hold: float = 0.001         # m: the constraint keeps a coupled knob pair's knob this close to its hole
+                                     # (along the side and across it) ...
+    knob_hold_step: float = 0.0002   # m: ... asking it at most this much further in per step than it is
+                                     # (pairs.constraint_margin)
     edges: bool = True               # keep every robot's footprint on the stage it stands on (the world's
                                      # stages, puzzlebot_common.stages; none on the flat floor), except the
                                      # robots of a behaviour requested with cross_edges (soft, exact penalty)
@@ -225,6 +229,7 @@ class MPCSettings:
         for key in ("w_free", "w_goal_terminal", "w_goal_stage", "w_goal_lateral", "w_velocity", "w_rest",
                     "w_control", "w_pair_terminal_pos", "w_pair_terminal_angle", "w_pair_stage_pos",
                     "w_pair_stage_angle", "w_pair_lateral", "w_coupled_pos", "w_coupled_angle", "pip_margin", "edge_margin",
+                    "knob_hold", "knob_hold_step",
                     "wiggle_v_bias", "wiggle_w_amplitude", "decouple_clearance", "decouple_creep",
                     "decouple_settle_speed", "decouple_settle_time", "decouple_reseat_time",
                     "decouple_reseat_speed", "wiggle_heading_amplitude", "wiggle_heading_gain", "wiggle_partner_turn", "hold_scale", "butterfly_lobe_robots",

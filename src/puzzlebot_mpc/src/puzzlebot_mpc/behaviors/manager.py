@@ -176,8 +176,8 @@ class BehaviorManager:
             active -= self._behavior.driven_pairs()
         for p in self.pair_slots():
             coupled = p.key in self.pairs.coupled
-            pi, pj = pr.alignment_points(p, poses.get(p.robot_i) if poses else None,
-                                         poses.get(p.robot_j) if poses else None,
+            pose_i, pose_j = (poses.get(p.robot_i), poses.get(p.robot_j)) if poses else (None, None)
+            pi, pj = pr.alignment_points(p, pose_i, pose_j,
                                          (s.approach_lookahead, s.approach_standoff_max, s.approach_gain_angle,
                                           s.approach_gain_lateral),
                                          mover="j" if coupled else self._ctx.mover(p) or "j",
@@ -185,7 +185,9 @@ class BehaviorManager:
             obj.pairs.append(PairObjective(self.index[p.robot_i], self.index[p.robot_j], pi, pj,
                                            active=p.key in active and not coupled, coupled=coupled,
                                            head=p.head, polygon=pr.coupling_polygon(p, self.geometry),
-                                           yaw_limit=pr.yaw_limit(p, self.geometry)))
+                                           yaw_limit=pr.yaw_limit(p, self.geometry),
+                                           margin=pr.constraint_margin(p, pose_i, pose_j, self.geometry, s.knob_hold,
+                                                                       s.knob_hold_step) if coupled else None))
         return obj
 
     # --------------------------------------------------------------- status
