@@ -23,7 +23,7 @@ assembly the rigid-body speeds that go with it (Couple.knob_objectives):
   |e| / tan(MAX_CUT) + run)`` behind the hole, ``e`` its offset from the
   lane; ``run`` is ``standoff``, or only ``level`` for a point already
   alongside the partner's side, less than ``standoff`` behind the hole,
-  with no corner left to pass) backs out to ``need + lookahead`` behind: an
+  with no corner left to pass) backs out to ``need + lookahead`` behind: a
   chain straight, without turning (a chain that reverses while it turns
   jack-knifes), a single robot or a row turning to its partner's heading
   (the run assumes a parallel mover: one that came out askew cuts in too
