@@ -7,6 +7,7 @@ import pytest
 from puzzlebot_common.config import load_yaml
 from puzzlebot_common.errors import ConfigError
 from puzzlebot_common.geometry import RobotGeometry
+from puzzlebot_mpc import docking as dk
 from puzzlebot_mpc import pairs as pr
 from puzzlebot_mpc.behaviors import (FAILED, RUNNING, SUCCEEDED, BehaviorError, BehaviorManager,
                                      BehaviorRequest, partner_turn, wiggle)
@@ -266,6 +267,30 @@ def test_the_second_anchor_pair_between_two_rows_frees_the_opening_robots_row_to
     obj = control_step(k, poses, 0.1)[1]
     assert k.pairs.active == [closing] and k.pairs.mover(closing) is None
     assert all(np.all(obj.velocity_mask[k.index[r]]) for r in poses)
+
+
+def test_an_anchor_pair_reseated_inside_a_loop_keeps_its_alignment_cost():
+    """A 2 x 2 grid with every pair coupled; one anchor pair between the rows opens 5 mm (pushed out by a
+    neighbour). The seat monitor sends it back to be pushed home, but it closes a loop: nobody can push it,
+    both rows hold but the opening robot's, and the alignment cost (not a docking command) brings it in."""
+    m, poses, left = bridge_with_pairs_coupled(pr.ANCHOR)
+    m.pairs.add_coupled(left)
+    m.pairs.goals.remove(left)
+    (pair,) = [q for q in m.pairs.coupled.values() if q.type == pr.ANCHOR and q.robot_j == "pz2"]
+    px, py, _ = poses["pz4"]
+    px += m.geometry.body_side / 2                                      # pz4's mouth: the row turns about it
+    c, sn = math.cos(-0.1), math.sin(-0.1)
+    for r in ("pz2", "pz4"):
+        x, y, th = poses[r]
+        poses[r] = (px + c * (x - px) - sn * (y - py), py + sn * (x - px) + c * (y - py), th - 0.1)
+    assert dk.seat_measure(pair, poses["pz1"], poses["pz2"])[0] > m.settings.dock_repair_gap
+    wait_for_the_seat_monitor(m, poses, pair)
+    assert m.pairs.docking[pair.key].phase == "push" and m.pairs.goals == [pair]
+    obj = control_step(m, poses, 5.0)[1]
+    assert m.pairs.active == [pair] and m.pairs.mover(pair) is None
+    (slot,) = [q for q in obj.pairs if (q.i, q.j) == (m.index[pair.robot_i], m.index[pair.robot_j])]
+    assert slot.active
+    assert not obj.open_loop
 
 
 def test_an_anchor_pair_closing_a_loop_is_coupled_once_its_faces_have_touched_for_the_loop_time():

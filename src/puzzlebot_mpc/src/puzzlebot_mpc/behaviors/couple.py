@@ -365,11 +365,14 @@ class Couple(Behavior):
                    for n, q in poses.items())
 
     def driven_pairs(self):
-        """Keys of the active pairs the docking manoeuvre drives this step (their alignment cost is off)."""
+        """Keys of the active pairs the docking manoeuvre drives this step (their alignment cost is off). A
+        pair with no mover (closing a loop; also an anchor pair re-seated inside one, whose docking stands in
+        its push phase) is not driven: nobody pushes it, and its alignment cost brings it in."""
         book = self.ctx.pairs
         knobs = {q.key for q in book.active if q.type == pr.KNOB and self.ctx.mover(q) is not None}
         axis = {q.key for q in book.active if self.on_axis_lane(q)}
-        return knobs | axis | {k for k, d in book.docking.items() if d.phase in dk.DRIVEN}
+        return knobs | axis | {k for k, d in book.docking.items()
+                               if d.phase in dk.DRIVEN and book.movers.get(k, "j") is not None}
 
     def display(self, request_id, state):
         """The target's name and its slots as placed (world frame); the MPC aligns pairs, not slot
