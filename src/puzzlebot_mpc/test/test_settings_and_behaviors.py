@@ -272,7 +272,8 @@ def test_the_second_anchor_pair_between_two_rows_frees_the_opening_robots_row_to
 def test_an_anchor_pair_reseated_inside_a_loop_keeps_its_alignment_cost():
     """A 2 x 2 grid with every pair coupled; one anchor pair between the rows opens 5 mm (pushed out by a
     neighbour). The seat monitor sends it back to be pushed home, but it closes a loop: nobody can push it,
-    both rows hold but the opening robot's, and the alignment cost (not a docking command) brings it in."""
+    so its alignment cost stays on (it is not counted as driven by its docking) and no robot gets a docking
+    command."""
     m, poses, left = bridge_with_pairs_coupled(pr.ANCHOR)
     m.pairs.add_coupled(left)
     m.pairs.goals.remove(left)
