@@ -739,6 +739,11 @@ class PairBook:
         del self.loop_seated[pair.key]
         return True
 
+    def pushed(self):
+        """Keys of the pairs a docking manoeuvre drives now (a driven phase) with a mover to drive them. A
+        pair re-seated inside a loop keeps its docking in the push phase, but has no mover: nobody pushes it."""
+        return {k for k, d in self.docking.items() if d.phase in DRIVEN and self.movers.get(k, "j") is not None}
+
     def _tugged(self):
         """Robots of the assemblies on which a docking manoeuvre pushes or pulls right now."""
         driven = [q for q in self.active if q.key in self.docking and self.docking[q.key].phase in DRIVEN]

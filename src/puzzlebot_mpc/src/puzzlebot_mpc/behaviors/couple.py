@@ -371,8 +371,7 @@ class Couple(Behavior):
         book = self.ctx.pairs
         knobs = {q.key for q in book.active if q.type == pr.KNOB and self.ctx.mover(q) is not None}
         axis = {q.key for q in book.active if self.on_axis_lane(q)}
-        return knobs | axis | {k for k, d in book.docking.items()
-                               if d.phase in dk.DRIVEN and book.movers.get(k, "j") is not None}
+        return knobs | axis | book.pushed()
 
     def display(self, request_id, state):
         """The target's name and its slots as placed (world frame); the MPC aligns pairs, not slot
